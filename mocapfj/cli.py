@@ -1,0 +1,135 @@
+"""``mocapfj COMMAND ...``: argument parsing only; the work is in mocapfj.pipeline.
+
+Every command reads paths, writes into ``--out DIR`` (inputs are never modified, files are
+written atomically), prints a short human summary, and with ``--json`` prints one JSON object on
+stdout. Bad input: one line on stderr and exit code 2.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from collections.abc import Callable, Sequence
+
+from . import __version__
+from .errors import InputError
+from .io import to_jsonable
+
+# Commands of the design that later versions fill in: (name, one-line help).
+PLANNED = [
+    ("simulate", "simulate a scenario file into a recording bundle with its truth"),
+    ("calibrate-camera", "calibrate camera intrinsics from board views"),
+    ("calibrate-rig", "calibrate a multi-camera rig (board or wand)"),
+    ("triangulate", "2D detections to labelled 3D marker trajectories"),
+    ("joints", "joint axes, link angles and deflections from markers"),
+    ("identify", "two-step identification of joint dynamics"),
+    ("frf", "multisine frequency response estimation"),
+    ("discover", "locate, name and model what the simulation misses"),
+    ("run", "the whole chain on a recording"),
+    ("report", "a readable report of a run"),
+    ("view", "open a run in rerun"),
+    ("batch", "run many recordings in parallel"),
+]
+
+
+def _emit(args, summary: dict, human: Callable[[dict], str]) -> None:
+    if getattr(args, "json", False):
+        print(json.dumps(to_jsonable(summary), allow_nan=False))
+    else:
+        print(human(summary))
+
+
+def _human_recording(s: dict) -> str:
+    m = s["markers"]
+    lines = []
+    if s.get("name"):
+        lines.append(f"recording {s['name']}")
+    lines.append(f"  markers    {m['file']}: {m['n_markers']} markers x {m['n_frames']} frames at "
+                 f"{m['rate_hz']:.6g} Hz, {m['missing_pct']:.1f} % missing")
+    if "controller" in s:
+        c = s["controller"]
+        lines.append(f"  controller {c['file']}: {c['n_samples']} samples at {c['rate_hz']:.6g} Hz, "
+                     f"{c['t_start_s']:.3f}..{c['t_end_s']:.3f} s (clock offset {s['clock_offset_s']} s)")
+    for j in s["joints"]:
+        parent = j["parent_markers"] if isinstance(j["parent_markers"], str) else ", ".join(j["parent_markers"])
+        lines.append(f"  joint {j['name']}: link markers {', '.join(j['link_markers'])} "
+                     f"({j['link_markers_missing_pct']:.1f} % missing), parent {parent}, "
+                     f"q_m {j['q_m_range_rad'][0]:+.3f}..{j['q_m_range_rad'][1]:+.3f} rad, "
+                     f"tau rms {j['tau_rms_Nm']:.3g} N m")
+    return "\n".join(lines)
+
+
+def _cmd_demo(args) -> int:
+    from .pipeline import run_demo
+
+    s = run_demo(args.out, seed=args.seed)
+
+    def human(s):
+        rt = s["round_trip"]
+        return (_human_recording(s) + f"\n  wrote {args.out}/recording (bundle) and {args.out}/summary.json"
+                f"\n  round trip: markers within {rt['marker_max_error_m'] * 1e6:.3f} um (C3D float32 mm), "
+                f"controller {'identical' if rt['controller_identical'] else 'CHANGED'}")
+
+    _emit(args, s, human)
+    return 0
+
+
+def _cmd_inspect(args) -> int:
+    from .pipeline import inspect_path
+
+    _emit(args, inspect_path(args.recording), _human_recording)
+    return 0
+
+
+def _planned(name: str) -> Callable:
+    def run(args) -> int:
+        print(f"mocapfj: error: '{name}' is not available in mocapfj {__version__} yet; "
+              "'mocapfj --help' lists what is", file=sys.stderr)
+        return 2
+    return run
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(
+        prog="mocapfj",
+        description="Measure flexible-joint robots with motion capture and identify their joint dynamics.",
+        epilog="Each command writes into --out DIR, prints a short summary (or one JSON object with "
+               "--json) and exits 2 with a one-line message on bad input.")
+    p.add_argument("--version", action="version", version=f"mocapfj {__version__}")
+    sub = p.add_subparsers(dest="command", metavar="COMMAND", required=True)
+
+    d = sub.add_parser("demo", help="the pipeline so far on a recording with known truth")
+    d.add_argument("--out", default="demo_out", help="output directory (default: demo_out)")
+    d.add_argument("--seed", type=int, default=0)
+    d.add_argument("--json", action="store_true", help="print a JSON summary on stdout")
+    d.set_defaults(func=_cmd_demo)
+
+    i = sub.add_parser("inspect", help="check and summarise a recording bundle or a C3D/TRC file")
+    i.add_argument("recording", help="bundle directory, recording.toml, or marker file")
+    i.add_argument("--json", action="store_true", help="print a JSON summary on stdout")
+    i.set_defaults(func=_cmd_inspect)
+
+    for name, help_text in PLANNED:
+        s = sub.add_parser(name, help=f"{help_text} (not yet available)", add_help=True)
+        s.add_argument("rest", nargs=argparse.REMAINDER, help=argparse.SUPPRESS)
+        s.set_defaults(func=_planned(name))
+    return p
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        return int(args.func(args))
+    except InputError as e:
+        print(f"mocapfj: error: {e}", file=sys.stderr)
+        return 2
+    except OSError as e:
+        where = f"{e.filename}: " if getattr(e, "filename", None) else ""
+        print(f"mocapfj: error: {where}{e.strerror or e}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

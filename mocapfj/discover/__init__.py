@@ -1,0 +1,1 @@
+"""mocapfj.discover"""

@@ -1,0 +1,271 @@
+"""Recording bundles: a directory with ``recording.toml``, a marker file, a controller CSV and
+optional URDF, rig and 2D detections (docs/formats.md).
+
+The keys of recording.toml are a contract with users' scripts: this module adds keys, it never
+renames them. Keys it does not interpret are kept in `Recording.spec` and written back.
+"""
+
+from __future__ import annotations
+
+import copy
+import os
+import shutil
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import InputError
+from ..types import WORLD, ControllerLog, JointSpec, MarkerTrajectories, Recording
+from .atomic import atomic_path
+from .c3d import read_c3d, write_c3d
+from .calib import read_rig, write_rig
+from .csvio import check_increasing, read_csv_columns, write_csv_columns
+from .results import read_detections, write_detections
+from .tomlio import check_format, read_toml, require, write_toml
+from .trc import read_trc, write_trc
+
+__all__ = [
+    "FORMAT",
+    "DEFAULT_DURATION_TOLERANCE_S",
+    "load_recording",
+    "write_recording",
+    "read_markers",
+    "write_markers",
+    "read_controller",
+]
+
+FORMAT = "mocapfj.recording/1"
+FORMAT_VERSION = 1
+DEFAULT_DURATION_TOLERANCE_S = 0.1
+"""How far the start and the end of the two streams may differ (after the declared clock
+offset) before the bundle is refused; ``[sync] duration_tolerance_s`` overrides it."""
+
+_JOINT_KEYS = ("name", "motor_position", "motor_torque", "gear_ratio", "link_markers", "parent_markers")
+
+
+def read_markers(path: str | os.PathLike[str]) -> MarkerTrajectories:
+    """Read a C3D or TRC marker file, chosen by its suffix."""
+    path = Path(path)
+    suffix = path.suffix.lower()
+    if suffix == ".c3d":
+        return read_c3d(path)
+    if suffix == ".trc":
+        return read_trc(path)
+    raise InputError(path, "markers.file", "a .c3d or .trc file", repr(path.name))
+
+
+def write_markers(path: str | os.PathLike[str], markers: MarkerTrajectories) -> None:
+    """Write a C3D or TRC marker file, chosen by its suffix, atomically."""
+    path = Path(path)
+    suffix = path.suffix.lower()
+    if suffix == ".c3d":
+        write_c3d(path, markers)
+    elif suffix == ".trc":
+        write_trc(path, markers)
+    else:
+        raise InputError(path, "markers.file", "a .c3d or .trc file", repr(path.name))
+
+
+def read_controller(path, time_column: str, joints: tuple[JointSpec, ...]) -> ControllerLog:
+    """Read a controller CSV into a ControllerLog, checking every column the joints name."""
+    cols = read_csv_columns(path)
+    wanted = [("controller.time_column", time_column)]
+    for j in joints:
+        wanted += [(f"joints[{j.name}].motor_position", j.motor_position),
+                   (f"joints[{j.name}].motor_torque", j.motor_torque)]
+    for field, col in wanted:
+        if col not in cols:
+            raise InputError(path, f"column {col!r} (named by {field})", f"one of the CSV columns {list(cols)}",
+                             "no such column")
+    t = cols[time_column]
+    check_increasing(path, f"column {time_column!r}", t)
+    used = {time_column} | {j.motor_position for j in joints} | {j.motor_torque for j in joints}
+    n = t.shape[0]
+    q_m = np.column_stack([cols[j.motor_position] for j in joints]) if joints else np.empty((n, 0))
+    tau = np.column_stack([cols[j.motor_torque] for j in joints]) if joints else np.empty((n, 0))
+    extra = {k: v for k, v in cols.items() if k not in used}
+    return ControllerLog(t=t, q_m=q_m, tau=tau, joint_names=tuple(j.name for j in joints), extra=extra)
+
+
+def _str_list(path, table, key, where) -> tuple[str, ...]:
+    value = require(path, table, key, list, where)
+    if not value or not all(isinstance(s, str) and s for s in value):
+        raise InputError(path, f"{where}.{key}", "a non-empty list of marker labels", repr(value))
+    return tuple(value)
+
+
+def _parse_joint(path, tab, i) -> JointSpec:
+    where = f"joints[{i}]"
+    if not isinstance(tab, dict):
+        raise InputError(path, where, "a [[joints]] table", repr(tab))
+    name = require(path, tab, "name", str, where)
+    where = f"joints[{name}]"
+    gear = require(path, tab, "gear_ratio", (int, float), where)
+    if not gear > 0:
+        raise InputError(path, f"{where}.gear_ratio", "a positive gear ratio", gear)
+    parent = tab.get("parent_markers", WORLD)
+    if isinstance(parent, str):
+        if parent != WORLD:
+            raise InputError(path, f"{where}.parent_markers", f'a list of marker labels or "{WORLD}"', repr(parent))
+    else:
+        parent = _str_list(path, tab, "parent_markers", where)
+    return JointSpec(
+        name=name,
+        motor_position=require(path, tab, "motor_position", str, where),
+        motor_torque=require(path, tab, "motor_torque", str, where),
+        gear_ratio=float(gear),
+        link_markers=_str_list(path, tab, "link_markers", where),
+        parent_markers=parent,
+        extra={k: v for k, v in tab.items() if k not in _JOINT_KEYS},
+    )
+
+
+def _bundle_file(root: Path, toml_path: Path, field: str, name: str) -> Path:
+    p = root / name
+    if not p.is_file():
+        raise InputError(toml_path, field, f"an existing file inside {root}", f"{name!r} (no such file)")
+    return p
+
+
+def load_recording(path: str | os.PathLike[str]) -> Recording:
+    """Load a recording bundle from its directory (or its recording.toml).
+
+    Checks, each an InputError naming file and field: the format version; the marker and
+    controller files exist; every column and marker label the joints name exists; no named
+    marker is missing in every frame; controller time increases strictly; the two streams cover
+    the same span (within ``[sync] duration_tolerance_s``, default 0.1 s) after the declared
+    clock offset.
+    """
+    path = Path(path)
+    toml_path = path / "recording.toml" if path.is_dir() else path
+    if not toml_path.is_file():
+        raise InputError(toml_path, "file", "a recording bundle directory holding recording.toml", "no such file")
+    root = toml_path.parent
+    doc = read_toml(toml_path)
+    check_format(toml_path, doc, "recording", FORMAT_VERSION)
+    name = require(toml_path, doc, "name", str, default=root.name)
+
+    mk = require(toml_path, doc, "markers", dict)
+    marker_file = require(toml_path, mk, "file", str, "markers")
+    offset = float(require(toml_path, mk, "clock_offset_s", (int, float), "markers", default=0.0))
+    ct = require(toml_path, doc, "controller", dict)
+    controller_file = require(toml_path, ct, "file", str, "controller")
+    time_column = require(toml_path, ct, "time_column", str, "controller", default="time")
+    joints_raw = require(toml_path, doc, "joints", list)
+    if not joints_raw:
+        raise InputError(toml_path, "joints", "at least one [[joints]] table", "none")
+    joints = tuple(_parse_joint(toml_path, tab, i) for i, tab in enumerate(joints_raw))
+    names = [j.name for j in joints]
+    if len(set(names)) != len(names):
+        raise InputError(toml_path, "joints.name", "unique joint names", names)
+
+    markers = read_markers(_bundle_file(root, toml_path, "markers.file", marker_file))
+    controller = read_controller(_bundle_file(root, toml_path, "controller.file", controller_file), time_column, joints)
+    _check_markers(root / marker_file, markers, joints)
+
+    sync = require(toml_path, doc, "sync", dict, default={})
+    tol = float(require(toml_path, sync, "duration_tolerance_s", (int, float), "sync", default=DEFAULT_DURATION_TOLERANCE_S))
+    _check_spans(toml_path, markers, controller, offset, tol)
+
+    urdf = rig = detections = None
+    model = require(toml_path, doc, "model", dict, default={})
+    if "urdf" in model:
+        urdf = _bundle_file(root, toml_path, "model.urdf", require(toml_path, model, "urdf", str, "model"))
+    rig_tab = require(toml_path, doc, "rig", dict, default={})
+    if "file" in rig_tab:
+        rig = read_rig(_bundle_file(root, toml_path, "rig.file", require(toml_path, rig_tab, "file", str, "rig")))
+    if "detections" in rig_tab:
+        detections = read_detections(
+            _bundle_file(root, toml_path, "rig.detections", require(toml_path, rig_tab, "detections", str, "rig")))
+
+    return Recording(
+        name=name, markers=markers, controller=controller, joints=joints, clock_offset_s=offset,
+        marker_file=marker_file, controller_file=controller_file, time_column=time_column,
+        urdf=urdf, rig=rig, detections=detections, root=root, spec=doc,
+    )
+
+
+def _check_markers(path, markers: MarkerTrajectories, joints) -> None:
+    for j in joints:
+        labels = list(j.link_markers) + ([] if j.parent_is_world else list(j.parent_markers))
+        for s in labels:
+            if s not in markers.labels:
+                raise InputError(path, f"marker {s!r} (named by joints[{j.name}])",
+                                 f"a label in the marker file ({len(markers.labels)} labels: {', '.join(markers.labels[:12])}"
+                                 f"{', ...' if len(markers.labels) > 12 else ''})", "no such label")
+            if np.all(np.isnan(markers.xyz[:, markers.index(s), 0])):
+                raise InputError(path, f"marker {s!r} (named by joints[{j.name}])", "a marker seen in at least one frame",
+                                 f"missing (NaN) in all {markers.n_frames} frames")
+
+
+def _check_spans(path, markers, controller, offset, tol) -> None:
+    if markers.n_frames == 0 or controller.n_samples == 0:
+        raise InputError(path, "markers/controller", "samples in both streams",
+                         f"{markers.n_frames} marker frames and {controller.n_samples} controller rows")
+    m0, m1 = markers.t[0] + offset, markers.t[-1] + offset
+    c0, c1 = controller.t[0], controller.t[-1]
+    if abs(m0 - c0) > tol or abs(m1 - c1) > tol:
+        raise InputError(
+            path, "streams", f"marker and controller streams covering the same time span within {tol} s",
+            f"markers {m0:.4f}..{m1:.4f} s ({m1 - m0:.4f} s) vs controller {c0:.4f}..{c1:.4f} s ({c1 - c0:.4f} s) "
+            f"on the controller clock",
+            hint="trim the longer stream, declare markers.clock_offset_s, or raise sync.duration_tolerance_s",
+        )
+
+
+def recording_spec(rec: Recording) -> dict:
+    """recording.toml contents for `rec`: its spec with the known keys set from its fields."""
+    doc = copy.deepcopy(dict(rec.spec))
+    doc["format"] = FORMAT
+    doc["name"] = rec.name
+    doc.setdefault("markers", {})
+    doc["markers"]["file"] = rec.marker_file
+    doc["markers"]["clock_offset_s"] = float(rec.clock_offset_s)
+    doc.setdefault("controller", {})
+    doc["controller"]["file"] = rec.controller_file
+    doc["controller"]["time_column"] = rec.time_column
+    joints = []
+    for j in rec.joints:
+        tab = dict(j.extra)
+        tab.update(name=j.name, motor_position=j.motor_position, motor_torque=j.motor_torque,
+                   gear_ratio=j.gear_ratio, link_markers=list(j.link_markers),
+                   parent_markers=WORLD if j.parent_is_world else list(j.parent_markers))
+        joints.append(tab)
+    doc["joints"] = joints
+    if rec.urdf is not None:
+        doc.setdefault("model", {})["urdf"] = doc.get("model", {}).get("urdf", "robot.urdf")
+    if rec.rig is not None:
+        doc.setdefault("rig", {}).setdefault("file", "rig.toml")
+    if rec.detections is not None:
+        doc.setdefault("rig", {}).setdefault("detections", "detections.csv")
+    return doc
+
+
+def write_recording(rec: Recording, out_dir: str | os.PathLike[str]) -> Path:
+    """Write `rec` as a bundle in `out_dir` (created); returns the recording.toml path.
+
+    Every file is written atomically, recording.toml last, so an interrupted write never leaves
+    a bundle that loads with half its data.
+    """
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    doc = recording_spec(rec)
+    write_markers(out / rec.marker_file, rec.markers)
+    cols = {rec.time_column: rec.controller.t}
+    for i, j in enumerate(rec.joints):
+        cols[j.motor_position] = rec.controller.q_m[:, i]
+        cols[j.motor_torque] = rec.controller.tau[:, i]
+    for k, v in rec.controller.extra.items():
+        cols.setdefault(k, v)
+    write_csv_columns(out / rec.controller_file, cols)
+    if rec.urdf is not None:
+        target = out / doc["model"]["urdf"]
+        if Path(rec.urdf).resolve() != target.resolve():
+            with atomic_path(target) as tmp:
+                shutil.copyfile(rec.urdf, tmp)
+    if rec.rig is not None:
+        write_rig(out / doc["rig"]["file"], rec.rig)
+    if rec.detections is not None:
+        write_detections(out / doc["rig"]["detections"], rec.detections)
+    write_toml(out / "recording.toml", doc)
+    return out / "recording.toml"

@@ -1,0 +1,72 @@
+"""TOML reading with errors that name the file, and versioned ``format`` keys."""
+
+from __future__ import annotations
+
+import os
+import re
+import tomllib
+from pathlib import Path
+
+import tomli_w
+
+from ..errors import InputError
+from .atomic import write_text_atomic
+
+__all__ = ["read_toml", "write_toml", "check_format", "require"]
+
+
+def read_toml(path: str | os.PathLike[str]) -> dict:
+    """Parse a TOML file; missing files and syntax errors become InputError."""
+    path = Path(path)
+    if not path.is_file():
+        raise InputError(path, "file", "an existing TOML file", "no such file")
+    try:
+        with open(path, "rb") as f:
+            return tomllib.load(f)
+    except tomllib.TOMLDecodeError as e:
+        raise InputError(path, "syntax", "valid TOML", str(e)) from None
+
+
+def write_toml(path: str | os.PathLike[str], doc: dict) -> None:
+    """Write `doc` as TOML, atomically."""
+    write_text_atomic(path, tomli_w.dumps(doc))
+
+
+def check_format(path, doc: dict, kind: str, supported: int) -> int:
+    """Check ``format = "mocapfj.<kind>/<N>"``; return N. Newer N than `supported` is an error."""
+    want = f"mocapfj.{kind}/{supported}"
+    fmt = doc.get("format")
+    m = re.fullmatch(rf"mocapfj\.{re.escape(kind)}/(\d+)", fmt) if isinstance(fmt, str) else None
+    if m is None:
+        raise InputError(path, "format", f'format = "{want}"', repr(fmt))
+    version = int(m.group(1))
+    if version > supported:
+        raise InputError(
+            path, "format", f"version {supported} or older", f"version {version}",
+            hint="the file was written by a newer mocapfj: upgrade mocapfj to read it",
+        )
+    return version
+
+
+_MISSING = object()
+
+
+def require(path, table: dict, key: str, kind: type | tuple[type, ...], where: str = "", default=_MISSING):
+    """Fetch ``table[key]`` checking its type; the error names ``where.key``."""
+    name = f"{where}.{key}" if where else key
+    if key not in table:
+        if default is not _MISSING:
+            return default
+        raise InputError(path, name, f"a value of type {_type_name(kind)}", "nothing (key missing)")
+    value = table[key]
+    if isinstance(value, bool) and bool not in (kind if isinstance(kind, tuple) else (kind,)):
+        raise InputError(path, name, f"a value of type {_type_name(kind)}", repr(value))
+    if not isinstance(value, kind):
+        raise InputError(path, name, f"a value of type {_type_name(kind)}", repr(value))
+    return value
+
+
+def _type_name(kind) -> str:
+    kinds = kind if isinstance(kind, tuple) else (kind,)
+    names = {str: "string", int: "integer", float: "number", list: "array", dict: "table", bool: "boolean"}
+    return " or ".join(dict.fromkeys(names.get(k, k.__name__) for k in kinds))

@@ -1,0 +1,383 @@
+"""Plain data types shared by every stage: one frozen dataclass per concept.
+
+Arrays are fields; shapes and units are in each docstring and follow docs/conventions.md:
+SI units, time axis first, NaN for a missing sample. The constructors check shapes once so that
+the code inside the package can trust them. Dataclasses compare by identity (``eq=False``)
+because their fields are arrays; tests compare fields with numpy.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from .errors import InputError
+
+__all__ = [
+    "MarkerTrajectories",
+    "ControllerLog",
+    "JointSpec",
+    "Detections",
+    "Camera",
+    "Rig",
+    "Board",
+    "Recording",
+    "WORLD",
+]
+
+WORLD = "world"
+"""`JointSpec.parent_markers` value for a joint whose parent link does not move."""
+
+
+def _f64(x, shape_desc: str, name: str, ndim: int | None = None) -> np.ndarray:
+    a = np.asarray(x, dtype=np.float64)
+    if ndim is not None and a.ndim != ndim:
+        raise InputError(None, name, f"an array of shape {shape_desc}", f"shape {a.shape}")
+    return a
+
+
+def _freeze(a: np.ndarray) -> np.ndarray:
+    a = np.array(a, copy=True)
+    a.setflags(write=False)
+    return a
+
+
+@dataclass(frozen=True, eq=False)
+class MarkerTrajectories:
+    """3D marker positions over time.
+
+    Attributes
+    ----------
+    t : (T,) float
+        Sample times in seconds on the mocap clock, strictly increasing.
+    xyz : (T, M, 3) float
+        Marker positions in metres in the mocap (world) frame; NaN where a marker is missing.
+    labels : tuple of M str
+        Marker labels, unique.
+    rate_hz : float
+        Nominal sampling rate in Hz.
+    residual : (T, M) float or None
+        Per-sample reconstruction residual in metres as reported by the mocap system
+        (C3D POINT residual); NaN where the marker is missing. None when the source has none.
+    """
+
+    t: np.ndarray
+    xyz: np.ndarray
+    labels: tuple[str, ...]
+    rate_hz: float
+    residual: np.ndarray | None = None
+
+    def __post_init__(self) -> None:
+        t = _f64(self.t, "(T,)", "t", 1)
+        xyz = _f64(self.xyz, "(T, M, 3)", "xyz", 3)
+        labels = tuple(str(s) for s in self.labels)
+        if xyz.shape[0] != t.shape[0] or xyz.shape[2] != 3 or xyz.shape[1] != len(labels):
+            raise InputError(
+                None, "xyz", f"shape (T={t.shape[0]}, M={len(labels)}, 3)", f"shape {xyz.shape}"
+            )
+        if len(set(labels)) != len(labels):
+            dup = sorted({s for s in labels if labels.count(s) > 1})
+            raise InputError(None, "labels", "unique marker labels", f"duplicates {dup}")
+        if not (np.isfinite(self.rate_hz) and self.rate_hz > 0):
+            raise InputError(None, "rate_hz", "a positive rate in Hz", self.rate_hz)
+        object.__setattr__(self, "t", _freeze(t))
+        object.__setattr__(self, "xyz", _freeze(xyz))
+        object.__setattr__(self, "labels", labels)
+        object.__setattr__(self, "rate_hz", float(self.rate_hz))
+        if self.residual is not None:
+            r = _f64(self.residual, "(T, M)", "residual", 2)
+            if r.shape != xyz.shape[:2]:
+                raise InputError(None, "residual", f"shape {xyz.shape[:2]}", f"shape {r.shape}")
+            object.__setattr__(self, "residual", _freeze(r))
+
+    @property
+    def n_frames(self) -> int:
+        return int(self.t.shape[0])
+
+    def index(self, label: str) -> int:
+        """Column of `label` in `xyz`; raises InputError when absent."""
+        try:
+            return self.labels.index(label)
+        except ValueError:
+            raise InputError(None, "marker label", f"one of {list(self.labels)}", repr(label)) from None
+
+    def select(self, labels) -> np.ndarray:
+        """Positions of the given markers, (T, len(labels), 3) metres."""
+        return self.xyz[:, [self.index(s) for s in labels], :]
+
+
+@dataclass(frozen=True, eq=False)
+class ControllerLog:
+    """The robot controller's log: motor side of each joint, expressed on the link side.
+
+    Attributes
+    ----------
+    t : (T,) float
+        Sample times in seconds on the controller clock, strictly increasing.
+    q_m : (T, J) float
+        Motor angle divided by the gear ratio, rad (link side).
+    tau : (T, J) float
+        Motor torque times the gear ratio, N m (link side).
+    joint_names : tuple of J str
+    extra : mapping of str to (T,) float
+        Any other logged columns, kept so that a bundle writes back losslessly.
+    """
+
+    t: np.ndarray
+    q_m: np.ndarray
+    tau: np.ndarray
+    joint_names: tuple[str, ...]
+    extra: Mapping[str, np.ndarray] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        t = _f64(self.t, "(T,)", "t", 1)
+        names = tuple(str(s) for s in self.joint_names)
+        shape = (t.shape[0], len(names))
+        q_m = _f64(self.q_m, "(T, J)", "q_m")
+        tau = _f64(self.tau, "(T, J)", "tau")
+        for name, a in (("q_m", q_m), ("tau", tau)):
+            if a.shape != shape:
+                raise InputError(None, name, f"shape {shape}", f"shape {a.shape}")
+        extra = {}
+        for k, v in dict(self.extra).items():
+            v = _f64(v, "(T,)", f"extra[{k!r}]", 1)
+            if v.shape[0] != t.shape[0]:
+                raise InputError(None, f"extra[{k!r}]", f"{t.shape[0]} samples", v.shape[0])
+            extra[str(k)] = _freeze(v)
+        object.__setattr__(self, "t", _freeze(t))
+        object.__setattr__(self, "q_m", _freeze(q_m))
+        object.__setattr__(self, "tau", _freeze(tau))
+        object.__setattr__(self, "joint_names", names)
+        object.__setattr__(self, "extra", extra)
+
+    @property
+    def n_samples(self) -> int:
+        return int(self.t.shape[0])
+
+    @property
+    def rate_hz(self) -> float:
+        """Median sampling rate in Hz."""
+        return float(1.0 / np.median(np.diff(self.t))) if self.t.size > 1 else float("nan")
+
+
+@dataclass(frozen=True, eq=False)
+class JointSpec:
+    """How one joint appears in a recording (the ``[[joints]]`` table of recording.toml).
+
+    Attributes
+    ----------
+    name : str
+    motor_position, motor_torque : str
+        Controller CSV columns: motor angle / gear ratio (rad) and motor torque x gear ratio (N m).
+    gear_ratio : float
+        Informative: the logged columns are already on the link side.
+    link_markers : tuple of str
+        Labels of the markers on the link this joint moves.
+    parent_markers : tuple of str, or the string ``"world"``
+        Labels of the markers on the parent link, or ``"world"`` when the parent does not move.
+    extra : mapping
+        Keys of the table that this version does not interpret; written back unchanged.
+    """
+
+    name: str
+    motor_position: str
+    motor_torque: str
+    gear_ratio: float
+    link_markers: tuple[str, ...]
+    parent_markers: tuple[str, ...] | str = WORLD
+    extra: Mapping[str, object] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "link_markers", tuple(self.link_markers))
+        if not isinstance(self.parent_markers, str):
+            object.__setattr__(self, "parent_markers", tuple(self.parent_markers))
+        object.__setattr__(self, "gear_ratio", float(self.gear_ratio))
+        object.__setattr__(self, "extra", dict(self.extra))
+
+    @property
+    def parent_is_world(self) -> bool:
+        return isinstance(self.parent_markers, str)
+
+
+@dataclass(frozen=True, eq=False)
+class Detections:
+    """2D detections from several cameras, one row per detected point.
+
+    Attributes
+    ----------
+    frame : (N,) int
+        Frame index (0-based) in the camera clip.
+    camera : (N,) int
+        Camera number, as in the rig (``cam_<number>``).
+    xy_px : (N, 2) float
+        Image position in pixels, OpenCV convention (origin at the centre of the top-left pixel).
+    point_id : (N,) int
+        Identity of the 3D point when known (marker index, board corner id), -1 when unlabelled.
+    """
+
+    frame: np.ndarray
+    camera: np.ndarray
+    xy_px: np.ndarray
+    point_id: np.ndarray
+
+    def __post_init__(self) -> None:
+        xy = _f64(self.xy_px, "(N, 2)", "xy_px", 2)
+        n = xy.shape[0]
+        if xy.shape[1] != 2:
+            raise InputError(None, "xy_px", "shape (N, 2)", f"shape {xy.shape}")
+        for name in ("frame", "camera", "point_id"):
+            a = np.asarray(getattr(self, name))
+            if a.shape != (n,):
+                raise InputError(None, name, f"shape ({n},)", f"shape {a.shape}")
+            object.__setattr__(self, name, _freeze(a.astype(np.int64)))
+        object.__setattr__(self, "xy_px", _freeze(xy))
+
+
+@dataclass(frozen=True, eq=False)
+class Camera:
+    """A calibrated pinhole camera with OpenCV distortion.
+
+    Attributes
+    ----------
+    name : str
+    size : (width, height) int
+        Image size in pixels.
+    K : (3, 3) float
+        Intrinsic matrix, pixels.
+    dist : (k,) float
+        OpenCV distortion coefficients (k1, k2, p1, p2[, k3, ...]).
+    R_cam_world : (3, 3) float
+        Rotation mapping world coordinates into the camera frame: p_cam = R p_world + t.
+    t_cam_world : (3,) float
+        Translation of the same map, metres.
+    """
+
+    name: str
+    size: tuple[int, int]
+    K: np.ndarray
+    dist: np.ndarray
+    R_cam_world: np.ndarray
+    t_cam_world: np.ndarray
+
+    def __post_init__(self) -> None:
+        for name, shape in (("K", (3, 3)), ("R_cam_world", (3, 3)), ("t_cam_world", (3,))):
+            a = np.asarray(getattr(self, name), dtype=np.float64)
+            if a.shape != shape:
+                raise InputError(None, f"camera {self.name!r} {name}", f"shape {shape}", f"shape {a.shape}")
+            object.__setattr__(self, name, _freeze(a))
+        object.__setattr__(self, "dist", _freeze(np.asarray(self.dist, dtype=np.float64).ravel()))
+        object.__setattr__(self, "size", (int(self.size[0]), int(self.size[1])))
+
+
+@dataclass(frozen=True, eq=False)
+class Rig:
+    """Calibrated cameras, ordered by camera number.
+
+    Attributes
+    ----------
+    cameras : tuple of Camera
+    metadata : mapping
+        Free-form facts from the rig file (residuals, uncertainty, the tool that made it).
+    """
+
+    cameras: tuple[Camera, ...]
+    metadata: Mapping[str, object] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "cameras", tuple(self.cameras))
+        object.__setattr__(self, "metadata", dict(self.metadata))
+
+
+BOARD_TYPES = ("chessboard", "charuco", "aprilgrid")
+
+
+@dataclass(frozen=True, eq=False)
+class Board:
+    """A planar calibration target (``calibration/boards/*.toml``).
+
+    Attributes
+    ----------
+    type : {"chessboard", "charuco", "aprilgrid"}
+    columns, rows : int
+        Inner corners (chessboard) or squares/tags (charuco, aprilgrid) along x and y.
+    square_m : float
+        Square size, metres (chessboard, charuco).
+    marker_m : float or None
+        ArUco marker side, metres (charuco).
+    dictionary : str or None
+        OpenCV ArUco dictionary name, e.g. ``"DICT_4X4_1000"`` (charuco, aprilgrid).
+    inverted : bool
+        The board is printed white-on-black: invert the grey image before detection.
+    tag_m, spacing_m : float or None
+        Tag side and gap between tags, metres (aprilgrid).
+    family : str or None
+        AprilTag family, e.g. ``"tag36h11"`` (aprilgrid).
+    """
+
+    type: str
+    columns: int
+    rows: int
+    square_m: float | None = None
+    marker_m: float | None = None
+    dictionary: str | None = None
+    inverted: bool = False
+    tag_m: float | None = None
+    spacing_m: float | None = None
+    family: str | None = None
+
+
+@dataclass(frozen=True, eq=False)
+class Recording:
+    """A loaded recording bundle (a directory with recording.toml; docs/formats.md).
+
+    Attributes
+    ----------
+    name : str
+    markers : MarkerTrajectories
+        On the mocap clock.
+    controller : ControllerLog
+        On the controller clock: t_controller = t_mocap + clock_offset_s.
+    joints : tuple of JointSpec
+    clock_offset_s : float
+        Declared offset between the clocks (hardware sync); 0 when not declared.
+    marker_file, controller_file : str
+        File names inside the bundle.
+    time_column : str
+        Controller CSV column holding time in seconds.
+    urdf : Path or None
+        Robot description, when the bundle has one.
+    rig : Rig or None
+    detections : Detections or None
+    root : Path or None
+        The bundle directory it was read from.
+    spec : mapping
+        The parsed recording.toml, including keys this version does not interpret; the writer
+        starts from it, so a bundle writes back losslessly.
+    """
+
+    name: str
+    markers: MarkerTrajectories
+    controller: ControllerLog
+    joints: tuple[JointSpec, ...]
+    clock_offset_s: float = 0.0
+    marker_file: str = "markers.c3d"
+    controller_file: str = "controller.csv"
+    time_column: str = "time"
+    urdf: Path | None = None
+    rig: Rig | None = None
+    detections: Detections | None = None
+    root: Path | None = None
+    spec: Mapping[str, object] = field(default_factory=dict)
+
+    def joint(self, name: str) -> JointSpec:
+        for j in self.joints:
+            if j.name == name:
+                return j
+        raise InputError(self.root, "joints", f"one of {[j.name for j in self.joints]}", repr(name))
+
+    def markers_t_controller(self) -> np.ndarray:
+        """Mocap sample times on the controller clock, (T,) s."""
+        return self.markers.t + self.clock_offset_s
