@@ -131,7 +131,7 @@ def read_c3d(path: str | os.PathLike[str]) -> MarkerTrajectories:
         raise InputError(path, "file", "an existing C3D file", "no such file")
     try:
         c = ezc3d.c3d(str(path))
-    except (RuntimeError, ValueError, IndexError) as e:
+    except (RuntimeError, ValueError, IndexError, OSError) as e:
         raise InputError(path, "file", "a readable C3D file", str(e).splitlines()[0] if str(e) else type(e).__name__) from None
     units = _param(c, "POINT", "UNITS")
     factor = unit_factor(path, "POINT:UNITS", units[0] if units else "")

@@ -1,6 +1,7 @@
 """Numeric CSV tables: a header row of column names, one row per sample.
 
-Used for the controller log and for per-joint outputs. Empty cells are NaN. Values are written
+Used for the controller log and for per-joint outputs. Empty cells and ``nan`` read as NaN;
+the writer writes ``nan``, so that a row is never blank. Values are written
 as the shortest text that reads back to the same float64, so a table reads back bit-identical.
 """
 
@@ -17,11 +18,11 @@ from .atomic import write_text_atomic
 __all__ = ["read_csv_columns", "write_csv_columns", "check_increasing", "format_floats"]
 
 
-def format_floats(a: np.ndarray) -> np.ndarray:
-    """Shortest text that reads back to the same float64 (Python repr); NaN becomes ''."""
+def format_floats(a: np.ndarray, nan: str = "nan") -> np.ndarray:
+    """Shortest text that reads back to the same float64 (Python repr); NaN becomes `nan`."""
     a = np.asarray(a, dtype=np.float64)
     out = np.array([repr(x) for x in a.ravel().tolist()], dtype=object).reshape(a.shape)
-    out[np.isnan(a)] = ""
+    out[np.isnan(a)] = nan
     return out
 
 
@@ -70,7 +71,7 @@ def _parse_slow(path, names, body) -> np.ndarray:
 
 
 def write_csv_columns(path: str | os.PathLike[str], columns: dict[str, np.ndarray]) -> None:
-    """Write equal-length columns as CSV, atomically; NaN becomes an empty cell."""
+    """Write equal-length columns as CSV, atomically; NaN is written as ``nan``."""
     names = list(columns)
     arrays = [np.asarray(columns[s]).ravel() for s in names]
     n = {a.shape[0] for a in arrays}
@@ -93,4 +94,4 @@ def check_increasing(path, field: str, t: np.ndarray) -> None:
     bad = np.flatnonzero(np.diff(t) <= 0)
     if bad.size:
         i = int(bad[0])
-        raise InputError(path, field, "strictly increasing times", f"{t[i + 1]!r} after {t[i]!r} at row {i + 3}")
+        raise InputError(path, field, "strictly increasing times", f"{float(t[i + 1])!r} after {float(t[i])!r} at row {i + 3}")

@@ -61,7 +61,7 @@ def read_trc(path: str | os.PathLike[str]) -> MarkerTrajectories:
     bad = np.flatnonzero(np.diff(t) <= 0)
     if bad.size:
         raise InputError(path, "Time", "strictly increasing times",
-                         f"{t[bad[0] + 1]!r} after {t[bad[0]]!r} at data row {bad[0] + 2}")
+                         f"{float(t[bad[0] + 1])!r} after {float(t[bad[0]])!r} at data row {bad[0] + 2}")
     xyz = table[:, 2:].reshape(len(rows), n_markers, 3) * factor
     xyz[np.isnan(xyz).any(axis=2)] = np.nan
     return MarkerTrajectories(t=t, xyz=xyz, labels=tuple(labels), rate_hz=rate)
@@ -84,7 +84,7 @@ def write_trc(path: str | os.PathLike[str], markers: MarkerTrajectories, units: 
         "\t\t" + "\t".join(f"X{i + 1}\tY{i + 1}\tZ{i + 1}" for i in range(n_markers)),
         "",
     ]
-    vals = format_floats(markers.xyz.reshape(n_frames, -1) / factor)
+    vals = format_floats(markers.xyz.reshape(n_frames, -1) / factor, nan="")
     frames = np.arange(1, n_frames + 1).astype(str).astype(object)
     body = ["\t".join(r) for r in np.column_stack([frames, format_floats(markers.t), vals]).tolist()]
     write_text_atomic(path, "\n".join(head + body) + "\n")
