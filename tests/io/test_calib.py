@@ -113,3 +113,12 @@ def test_shipped_boards_load():
     assert len(boards) >= 3
     for b in boards:
         read_board(b)
+
+
+def test_newer_board_and_rig_versions_are_refused(tmp_path):
+    (tmp_path / "b.toml").write_text('format = "mocapfj.board/2"\n[board]\ntype = "chessboard"\ncolumns = 9\nrows = 6\nsquare_m = 0.03\n')
+    with pytest.raises(InputError, match=r"b\.toml: format: expected version 1 or older, got version 2"):
+        read_board(tmp_path / "b.toml")
+    (tmp_path / "r.toml").write_text('format = "mocapfj.rig/3"\n' + ANIPOSE)
+    with pytest.raises(InputError, match=r"r\.toml: format: expected version 1 or older, got version 3"):
+        read_rig(tmp_path / "r.toml", units="mm")
