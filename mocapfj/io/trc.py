@@ -9,6 +9,7 @@ fields are missing samples (NaN).
 from __future__ import annotations
 
 import os
+import re
 from pathlib import Path
 
 import numpy as np
@@ -45,16 +46,8 @@ def read_trc(path: str | os.PathLike[str]) -> MarkerTrajectories:
     labels = [s for s in labels if s]
     n_markers = len(labels)
     n_cols = 2 + 3 * n_markers
-    rows = [ln.split("\t") for ln in lines[5:] if ln.strip()]
-    table = np.full((len(rows), n_cols), np.nan)
-    for i, row in enumerate(rows):  # file boundary: text parsing, once per load
-        for j, cell in enumerate(row[:n_cols]):
-            cell = cell.strip()
-            if cell:
-                try:
-                    table[i, j] = float(cell)
-                except ValueError:
-                    raise InputError(path, f"row {i + 6} column {j + 1}", "a number", repr(cell)) from None
+    body = [ln.rstrip("\r") for ln in lines[5:] if ln.strip()]
+    table = _parse_rows(path, body, n_cols)
     t = table[:, 1]
     if np.any(~np.isfinite(t)):
         raise InputError(path, "Time", "a time in every row", f"missing at data row {int(np.argmax(~np.isfinite(t))) + 1}")
@@ -62,9 +55,31 @@ def read_trc(path: str | os.PathLike[str]) -> MarkerTrajectories:
     if bad.size:
         raise InputError(path, "Time", "strictly increasing times",
                          f"{float(t[bad[0] + 1])!r} after {float(t[bad[0]])!r} at data row {bad[0] + 2}")
-    xyz = table[:, 2:].reshape(len(rows), n_markers, 3) * factor
+    xyz = table[:, 2:].reshape(len(table), n_markers, 3) * factor
     xyz[np.isnan(xyz).any(axis=2)] = np.nan
     return MarkerTrajectories(t=t, xyz=xyz, labels=tuple(labels), rate_hz=rate)
+
+
+_EMPTY = re.compile(r"(?<![^\t])(?=\t|$)")  # an empty cell: at line start or after a tab, before a tab or the end
+
+
+def _parse_rows(path, body: list[str], n_cols: int) -> np.ndarray:
+    """Rows of tab-separated numbers into (N, n_cols); empty or absent trailing cells are NaN."""
+    if not body:
+        return np.empty((0, n_cols))
+    filled = [_EMPTY.sub("nan", ln) for ln in body]
+    counts = np.fromiter((ln.count("\t") + 1 for ln in filled), dtype=np.int64, count=len(filled))
+    filled = [ln + "\tnan" * (n_cols - c) if c < n_cols else ln for ln, c in zip(filled, counts)]
+    try:
+        return np.loadtxt(filled, delimiter="\t", ndmin=2, usecols=range(n_cols), dtype=np.float64)
+    except ValueError:
+        for i, ln in enumerate(filled):  # name the first bad cell
+            for j, cell in enumerate(ln.split("\t")[:n_cols]):
+                try:
+                    float(cell)
+                except ValueError:
+                    raise InputError(path, f"row {i + 6} column {j + 1}", "a number", repr(cell.strip())) from None
+        raise
 
 
 def write_trc(path: str | os.PathLike[str], markers: MarkerTrajectories, units: str = "mm") -> None:
