@@ -18,7 +18,6 @@ from .io import to_jsonable
 
 # Commands of the design that later versions fill in: (name, one-line help).
 PLANNED = [
-    ("simulate", "simulate a scenario file into a recording bundle with its truth"),
     ("calibrate-camera", "calibrate camera intrinsics from board views"),
     ("calibrate-rig", "calibrate a multi-camera rig (board or wand)"),
     ("triangulate", "2D detections to labelled 3D marker trajectories"),
@@ -63,15 +62,32 @@ def _human_recording(s: dict) -> str:
 def _cmd_demo(args) -> int:
     from .pipeline import run_demo
 
-    s = run_demo(args.out, seed=args.seed)
+    s = run_demo(args.out, duration_s=args.duration)
+    _emit(args, s, lambda s: _human_simulate(s, f"{args.out}/pa10_joint2"))
+    return 0
 
-    def human(s):
-        rt = s["round_trip"]
-        return (_human_recording(s) + f"\n  wrote {args.out}/recording (bundle) and {args.out}/summary.json"
-                f"\n  round trip: markers within {rt['marker_max_error_m'] * 1e6:.3f} um (C3D float32 mm), "
-                f"controller {'identical' if rt['controller_identical'] else 'CHANGED'}")
 
-    _emit(args, s, human)
+def _human_simulate(s: dict, out) -> str:
+    lines = [_human_recording(s), f"  scenario {s['scenario']}: {s['duration_s']:g} s simulated in "
+             + ", ".join(f"{k} {v:.1f} s" for k, v in s["timings_s"].items())]
+    for j in s["truth"]["joints"]:
+        lines.append(f"  truth {j['name']}: angle CRLB {j['angle_sigma_rad'] * 1e3:.3f} mrad, deflection noise SD "
+                     f"{j['deflection_noise_sd_rad'] * 1e3:.3f} mrad")
+    for e in s["effects"]:
+        if "ratio" in e:
+            lines.append(f"  effect {e['name']} on {e['joint']}: deflection RMS {e['deflection_rms_rad'] * 1e3:.3f} mrad "
+                         f"= {e['ratio']:.2f} x noise SD ({'concealed' if e['concealed'] else 'VISIBLE'})")
+        else:
+            lines.append(f"  effect {e['name']} on {e['joint']}")
+    lines.append(f"  wrote {out} (bundle, truth.json, truth.csv, truth_mocap.csv)")
+    return "\n".join(lines)
+
+
+def _cmd_simulate(args) -> int:
+    from .pipeline import run_simulate
+
+    s = run_simulate(args.scenario, args.out, duration_s=args.duration, concealment=not args.no_concealment)
+    _emit(args, s, lambda s: _human_simulate(s, args.out))
     return 0
 
 
@@ -101,9 +117,18 @@ def build_parser() -> argparse.ArgumentParser:
 
     d = sub.add_parser("demo", help="the pipeline so far on a recording with known truth")
     d.add_argument("--out", default="demo_out", help="output directory (default: demo_out)")
-    d.add_argument("--seed", type=int, default=0)
+    d.add_argument("--duration", type=float, default=None, help="shorten the 60 s demo recording, s")
     d.add_argument("--json", action="store_true", help="print a JSON summary on stdout")
     d.set_defaults(func=_cmd_demo)
+
+    sm = sub.add_parser("simulate", help="simulate a scenario file into a recording bundle with its truth")
+    sm.add_argument("scenario", help="scenario TOML (datasets/*.toml)")
+    sm.add_argument("--out", required=True, help="output bundle directory")
+    sm.add_argument("--duration", type=float, default=None, help="override the scenario's duration_s")
+    sm.add_argument("--no-concealment", action="store_true",
+                    help="skip the nominal run that measures each planted effect against the noise")
+    sm.add_argument("--json", action="store_true", help="print a JSON summary on stdout")
+    sm.set_defaults(func=_cmd_simulate)
 
     i = sub.add_parser("inspect", help="check and summarise a recording bundle or a C3D/TRC file")
     i.add_argument("recording", help="bundle directory, recording.toml, or marker file")

@@ -10,7 +10,7 @@ from .errors import InputError
 from .io import load_recording, read_markers, write_json, write_recording
 from .types import MarkerTrajectories, Recording
 
-__all__ = ["summarize_markers", "summarize_recording", "inspect_path", "run_demo"]
+__all__ = ["summarize_markers", "summarize_recording", "inspect_path", "run_simulate", "run_demo"]
 
 
 def summarize_markers(m: MarkerTrajectories, file: str = "") -> dict:
@@ -77,25 +77,52 @@ def inspect_path(path: str | Path) -> dict:
     return summarize_recording(load_recording(path))
 
 
-def run_demo(out: str | Path, seed: int = 0) -> dict:
+def default_scenario(name: str = "pa10_joint2") -> Path:
+    """A shipped scenario file: datasets/NAME.toml in the working directory or beside the package."""
+    for root in (Path.cwd(), Path(__file__).resolve().parents[1]):
+        p = root / "datasets" / f"{name}.toml"
+        if p.is_file():
+            return p
+    raise InputError(f"datasets/{name}.toml", "scenario", "the shipped scenario file (run from the repository)",
+                     "no such file")
+
+
+def run_demo(out: str | Path, duration_s: float | None = None) -> dict:
     """The pipeline so far, on a recording whose truth is known.
 
-    Writes a toy one-joint bundle to ``OUT/recording``, loads it back through the same readers
-    a user's bundle goes through, and writes ``OUT/summary.json``.
+    Simulates the shipped pa10_joint2 scenario (seed 000 Table I, joint 2) into ``OUT/pa10_joint2``
+    (bundle, truth.json, truth.csv), loads it back through the readers a lab's recording goes
+    through, and writes ``OUT/summary.json``.
     """
-    from .synth import TOY_TRUTH, toy_recording
-
     out = Path(out)
-    rec = toy_recording(seed=seed)
-    write_recording(rec, out / "recording")
-    back = load_recording(out / "recording")
-    seen = ~np.isnan(rec.markers.xyz)
-    summary = summarize_recording(back)
-    summary["truth"] = TOY_TRUTH
-    summary["round_trip"] = {
-        "marker_max_error_m": float(np.max(np.abs(back.markers.xyz[seen] - rec.markers.xyz[seen]))),
-        "controller_identical": bool(np.array_equal(back.controller.q_m, rec.controller.q_m)
-                                     and np.array_equal(back.controller.tau, rec.controller.tau)),
-    }
+    summary = run_simulate(default_scenario(), out / "pa10_joint2", duration_s=duration_s, concealment=False)
     write_json(out / "summary.json", summary)
+    return summary
+
+
+def run_simulate(scenario: str | Path, out: str | Path, duration_s: float | None = None,
+                 concealment: bool = True) -> dict:
+    """Simulate a scenario file into a recording bundle with its truth (``mocapfj simulate``).
+
+    Writes OUT/recording.toml and the bundle's files, truth.json (parameters, planted effects
+    with their concealment numbers), truth.csv (true signals on the controller clock),
+    truth_mocap.csv (true link angles at the mocap instants) and a copy of the scenario.
+    """
+    from .synth.record import record_scenario, write_scenario_bundle
+    from .synth.scenario import load_scenario
+
+    scn = load_scenario(scenario)
+    if duration_s is not None:
+        if not duration_s > 0:
+            raise InputError(None, "--duration", "a positive duration in s", duration_s)
+        scn = scn.with_duration(duration_s)
+    sr = record_scenario(scn, with_concealment=concealment)
+    write_scenario_bundle(sr, out, Path(scenario))
+    summary = summarize_recording(load_recording(out))
+    summary["scenario"] = scn.name
+    summary["duration_s"] = scn.duration_s
+    summary["effects"] = sr.truth["effects"]
+    summary["truth"] = {"joints": [{k: j[k] for k in ("name", "angle_sigma_rad", "deflection_noise_sd_rad")}
+                                   for j in sr.truth["joints"]], "clock": sr.truth["clock"]}
+    summary["timings_s"] = sr.timings_s
     return summary

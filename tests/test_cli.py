@@ -23,15 +23,35 @@ def test_help_lists_every_command_of_the_design(capsys):
         assert f"\n    {cmd} " in out or f"\n    {cmd}\n" in out, cmd
 
 
-def test_demo_json_reports_a_clean_round_trip(tmp_path, capsys):
-    assert main(["demo", "--out", str(tmp_path / "d"), "--json"]) == 0
+def test_demo_simulates_pa10_joint2_and_reads_it_back(tmp_path, capsys):
+    assert main(["demo", "--out", str(tmp_path / "d"), "--duration", "4", "--json"]) == 0
     s = json.loads(capsys.readouterr().out)
-    assert s["round_trip"]["controller_identical"] is True
-    assert s["round_trip"]["marker_max_error_m"] < 1e-7  # float32 millimetres in the C3D
-    assert [j["name"] for j in s["joints"]] == ["j1"]
+    assert s["scenario"] == "pa10_joint2" and [j["name"] for j in s["joints"]] == ["j2"]
     assert s["markers"]["n_frames"] == 1001 and s["controller"]["n_samples"] == 4001
-    assert (tmp_path / "d" / "recording" / "recording.toml").is_file()
-    assert json.loads((tmp_path / "d" / "summary.json").read_text())["name"] == "toy_joint1"
+    assert s["markers"]["n_markers"] == 20 and s["rig_cameras"] == 8
+    assert 3e-4 < s["truth"]["joints"][0]["angle_sigma_rad"] < 6e-4
+    assert (tmp_path / "d" / "pa10_joint2" / "recording.toml").is_file()
+    assert json.loads((tmp_path / "d" / "summary.json").read_text())["name"] == "pa10_joint2"
+
+
+def test_simulate_reports_concealment(tmp_path, capsys):
+    from pathlib import Path
+
+    scn = Path(__file__).resolve().parents[1] / "datasets" / "suite" / "backlash_ident.toml"
+    assert main(["simulate", str(scn), "--out", str(tmp_path / "b"), "--duration", "4"]) == 0
+    out = capsys.readouterr().out
+    assert "effect backlash on j2: deflection RMS" in out and "(concealed)" in out
+    truth = json.loads((tmp_path / "b" / "truth.json").read_text())
+    assert truth["effects"][0]["name"] == "backlash" and truth["effects"][0]["ratio"] < 1
+
+
+def test_simulate_bad_scenario_exits_2(tmp_path, capsys):
+    p = tmp_path / "bad.toml"
+    p.write_text('format = "mocapfj.scenario/1"\nduration_s = 1.0\n')
+    assert main(["simulate", str(p), "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "bad.toml: joints: expected a value of type array" in err
+    assert not (tmp_path / "o").exists()
 
 
 def test_inspect_real_c3d(realdata, capsys):
@@ -42,11 +62,12 @@ def test_inspect_real_c3d(realdata, capsys):
 
 
 def test_bad_input_is_one_line_and_exit_2(tmp_path, capsys):
-    assert main(["demo", "--out", str(tmp_path / "d")]) == 0
-    capsys.readouterr()
-    toml = tmp_path / "d" / "recording" / "recording.toml"
+    from mocapfj.io import write_recording
+    from mocapfj.synth import toy_recording
+
+    toml = write_recording(toy_recording(duration_s=0.5), tmp_path / "d")
     toml.write_text(toml.read_text().replace('"mocapfj.recording/1"', '"mocapfj.recording/9"'))
-    assert main(["inspect", str(tmp_path / "d" / "recording")]) == 2
+    assert main(["inspect", str(tmp_path / "d")]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1
     assert err.startswith("mocapfj: error: ") and "format: expected version 1 or older, got version 9" in err
