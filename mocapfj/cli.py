@@ -79,14 +79,16 @@ def _human_simulate(s: dict, out) -> str:
                          f"= {e['ratio']:.2f} x noise SD ({'concealed' if e['concealed'] else 'VISIBLE'})")
         else:
             lines.append(f"  effect {e['name']} on {e['joint']}")
-    lines.append(f"  wrote {out} (bundle, truth.json, truth.csv, truth_mocap.csv)")
+    lines.append(f"  wrote {out} (bundle, truth.json, truth.csv, truth_mocap.csv"
+                 + (f", {s['images']} images" if s.get("images") else "") + ")")
     return "\n".join(lines)
 
 
 def _cmd_simulate(args) -> int:
     from .pipeline import run_simulate
 
-    s = run_simulate(args.scenario, args.out, duration_s=args.duration, concealment=not args.no_concealment)
+    s = run_simulate(args.scenario, args.out, duration_s=args.duration, concealment=not args.no_concealment,
+                     images=args.images)
     _emit(args, s, lambda s: _human_simulate(s, args.out))
     return 0
 
@@ -127,6 +129,8 @@ def build_parser() -> argparse.ArgumentParser:
     sm.add_argument("--duration", type=float, default=None, help="override the scenario's duration_s")
     sm.add_argument("--no-concealment", action="store_true",
                     help="skip the nominal run that measures each planted effect against the noise")
+    sm.add_argument("--images", action="store_true",
+                    help="also write images/: board calibration views and a blob clip, with their truth")
     sm.add_argument("--json", action="store_true", help="print a JSON summary on stdout")
     sm.set_defaults(func=_cmd_simulate)
 

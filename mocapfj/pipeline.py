@@ -101,12 +101,14 @@ def run_demo(out: str | Path, duration_s: float | None = None) -> dict:
 
 
 def run_simulate(scenario: str | Path, out: str | Path, duration_s: float | None = None,
-                 concealment: bool = True) -> dict:
+                 concealment: bool = True, images: bool = False) -> dict:
     """Simulate a scenario file into a recording bundle with its truth (``mocapfj simulate``).
 
     Writes OUT/recording.toml and the bundle's files, truth.json (parameters, planted effects
     with their concealment numbers), truth.csv (true signals on the controller clock),
-    truth_mocap.csv (true link angles at the mocap instants) and a copy of the scenario.
+    truth_mocap.csv (true link angles at the mocap instants) and a copy of the scenario. With
+    `images`, also OUT/images/: board calibration views and a blob clip with their truth
+    (the scenario's ``[images]`` table: ``views``, ``clip_frames``, ``board``).
     """
     from .synth.record import record_scenario, write_scenario_bundle
     from .synth.scenario import load_scenario
@@ -118,7 +120,9 @@ def run_simulate(scenario: str | Path, out: str | Path, duration_s: float | None
         scn = scn.with_duration(duration_s)
     sr = record_scenario(scn, with_concealment=concealment)
     write_scenario_bundle(sr, out, Path(scenario))
+    n_images = _write_images(scn, sr, Path(out) / "images") if images else 0
     summary = summarize_recording(load_recording(out))
+    summary["images"] = n_images
     summary["scenario"] = scn.name
     summary["duration_s"] = scn.duration_s
     summary["effects"] = sr.truth["effects"]
@@ -126,3 +130,25 @@ def run_simulate(scenario: str | Path, out: str | Path, duration_s: float | None
                                    for j in sr.truth["joints"]], "clock": sr.truth["clock"]}
     summary["timings_s"] = sr.timings_s
     return summary
+
+
+def _write_images(scn, sr, out: Path) -> int:
+    """Board views and a blob clip for a simulated recording; returns the number of images."""
+    from .io.calib import board_from_table
+    from .io.tomlio import require
+    from .synth.record import _layout, _rngs
+    from .synth.robot_mesh import pa10_geometry
+    from .synth.views import DEFAULT_BOARD, write_blob_clip, write_board_views
+
+    tab = require(scn.source, scn.doc, "images", dict, default={})
+    views = int(require(scn.source, tab, "views", int, "images", default=8))
+    frames = int(require(scn.source, tab, "clip_frames", int, "images", default=10))
+    board = board_from_table(tab["board"], scn.source, "images.board") if "board" in tab else DEFAULT_BOARD
+    rng = np.random.default_rng(np.random.SeedSequence([scn.seed, 7]))
+    truth = write_board_views(out, sr.recording.rig, board, views, rng)
+    q_full = np.tile(np.asarray(scn.pose_rad, float), (min(frames, sr.q_true_mocap.shape[0]), 1))
+    for i, j in enumerate(scn.joints):
+        q_full[:, j.axis - 1] = sr.q_true_mocap[: q_full.shape[0], i]
+    layout = _layout(scn, pa10_geometry(), _rngs(scn)[0])
+    write_blob_clip(out, sr.recording.rig, layout, q_full, rng)
+    return len(truth["images"]) + q_full.shape[0] * len(sr.recording.rig.cameras)

@@ -20,7 +20,7 @@ from ..types import BOARD_TYPES, Board, Camera, Rig
 from .c3d import unit_factor
 from .tomlio import check_format, read_toml, require, write_toml
 
-__all__ = ["read_rig", "write_rig", "read_board", "write_board", "rodrigues_to_matrix", "matrix_to_rodrigues"]
+__all__ = ["read_rig", "write_rig", "read_board", "board_from_table", "write_board", "rodrigues_to_matrix", "matrix_to_rodrigues"]
 
 
 def rodrigues_to_matrix(r: np.ndarray) -> np.ndarray:
@@ -118,26 +118,31 @@ def read_board(path: str | os.PathLike[str]) -> Board:
     doc = read_toml(path)
     if "format" in doc:
         check_format(path, doc, "board", 1)
-    tab = require(path, doc, "board", dict)
-    kind = require(path, tab, "type", str, "board")
+    return board_from_table(require(path, doc, "board", dict), path, "board")
+
+
+def board_from_table(tab: dict, path=None, where: str = "board") -> Board:
+    """A Board from its table (the ``[board]`` table of a board file, or one inside another file)."""
+    kind = require(path, tab, "type", str, where)
     if kind not in BOARD_TYPES:
-        raise InputError(path, "board.type", f"one of {list(BOARD_TYPES)}", repr(kind))
-    cols = require(path, tab, "columns", int, "board")
-    rows = require(path, tab, "rows", int, "board")
+        raise InputError(path, f"{where}.type", f"one of {list(BOARD_TYPES)}", repr(kind))
+    cols = require(path, tab, "columns", int, where)
+    rows = require(path, tab, "rows", int, where)
     if cols < 2 or rows < 2:
-        raise InputError(path, "board.columns/rows", "at least 2 x 2", f"{cols} x {rows}")
+        raise InputError(path, f"{where}.columns/rows", "at least 2 x 2", f"{cols} x {rows}")
     values = {}
     for key in ("square_m", "marker_m", "tag_m", "spacing_m"):
-        v = require(path, tab, key, (int, float), "board", default=None)
+        v = require(path, tab, key, (int, float), where, default=None)
         if v is not None and not v > 0:
-            raise InputError(path, f"board.{key}", "a positive length in metres", v)
+            raise InputError(path, f"{where}.{key}", "a positive length in metres", v)
         values[key] = None if v is None else float(v)
     for key in ("dictionary", "family"):
-        values[key] = require(path, tab, key, str, "board", default=None)
+        values[key] = require(path, tab, key, str, where, default=None)
     for key in _BOARD_REQUIRED[kind]:
         if values[key] is None:
-            raise InputError(path, f"board.{key}", f"a value (required for a {kind})", "nothing (key missing)")
-    return Board(type=kind, columns=cols, rows=rows, inverted=bool(require(path, tab, "inverted", bool, "board", default=False)), **values)
+            raise InputError(path, f"{where}.{key}", f"a value (required for a {kind})", "nothing (key missing)")
+    return Board(type=kind, columns=cols, rows=rows, inverted=bool(require(path, tab, "inverted", bool, where, default=False)),
+                 **values)
 
 
 def write_board(path: str | os.PathLike[str], board: Board) -> None:
