@@ -40,8 +40,8 @@ EFFECTS = {
                            "Coulomb 11.0 / 7.6 N m and viscous 19.5 / 17.2 N m s for positive / negative speed"),
     "time_delay": ({"delay_s": 1.0e-3}, "mocap clock 1.0 ms late beyond the declared offset"),
     "coupling": ({"source": "j3", "inertia_kgm2": 2.5}, "reaction torque -2.5 kg m^2 x q3'' from the moving elbow"),
-    "gravity_mismatch": ({"k": 8000.0, "a": 0.10, "b": 0.30, "free_length": 0.20, "q0": 0.0},
-                         "a spring gravity balancer, 8 kN/m on 0.10 / 0.30 m arms, free length 0.20 m"),
+    "gravity_mismatch": ({"k": 5000.0, "a": 0.10, "b": 0.30, "free_length": 0.20, "q0": 0.0},
+                         "a spring gravity balancer, 5 kN/m on 0.10 / 0.30 m arms, free length 0.20 m"),
     "drive_gain": ({"gain": 1.05}, "the drive delivers 5 % more torque than the controller logs"),
 }
 
