@@ -4,10 +4,10 @@ Conventions (units, frames, signs) are in docs/conventions.md; file formats in d
 """
 
 from .errors import InputError
-from .types import (WORLD, Board, Camera, ControllerLog, Detections, JointSpec, MarkerTrajectories,
-                    Recording, Rig)
+from .types import (WORLD, Board, Camera, ControllerLog, Detections, JointAngles, JointGeometry, JointSpec,
+                    MarkerTrajectories, Recording, Rig)
 
 __version__ = "0.1.0"
 
-__all__ = ["InputError", "WORLD", "Board", "Camera", "ControllerLog", "Detections", "JointSpec",
+__all__ = ["InputError", "WORLD", "Board", "Camera", "ControllerLog", "Detections", "JointAngles", "JointGeometry", "JointSpec",
            "MarkerTrajectories", "Recording", "Rig", "__version__"]

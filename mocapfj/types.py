@@ -25,6 +25,8 @@ __all__ = [
     "Rig",
     "Board",
     "Recording",
+    "JointGeometry",
+    "JointAngles",
     "WORLD",
 ]
 
@@ -381,3 +383,93 @@ class Recording:
     def markers_t_controller(self) -> np.ndarray:
         """Mocap sample times on the controller clock, (T,) s."""
         return self.markers.t + self.clock_offset_s
+
+
+@dataclass(frozen=True, eq=False)
+class JointGeometry:
+    """A revolute joint calibrated from a marker cluster (docs/conventions.md).
+
+    The link's markers move about the joint in the frame of the parent (the world when the parent
+    does not move): at link angle q, marker p is at ``point + R(axis, q) @ template[p]`` (rotation
+    by q about `axis`, right hand), with q = 0 where the template was taken.
+
+    Attributes
+    ----------
+    axis : (3,) float
+        Unit axis direction in the parent frame.
+    point : (3,) float
+        The point of the axis closest to the markers' centroid (foot of the perpendicular), metres.
+    template : (P, 3) float
+        Marker positions relative to `point` at q = 0, parent frame, metres, in `labels` order.
+    labels : tuple of P str
+    radii : (P,) float
+        Distance of each marker from the axis, metres (r_p).
+    radius_rms : (P,) float
+        RMS of each marker's distance from the axis over the calibration frames minus r_p, metres.
+    marker_rms : float
+        RMS of the marker residuals of the fit, metres.
+    cov_axis : (3, 3) float
+        Covariance of `axis` (rank 2: tilt), rad^2.
+    cov_point : (3, 3) float
+        Covariance of `point` (rank 2: in the plane normal to the axis), m^2.
+    sigma_m : float
+        Marker noise SD the fit estimated (or was given), metres per coordinate.
+    method : str
+        "gamage_lasenby", "halvorsen", "ml", "sara" or "score".
+    n_frames : int
+        Frames used.
+    """
+
+    axis: np.ndarray
+    point: np.ndarray
+    template: np.ndarray
+    labels: tuple[str, ...]
+    radii: np.ndarray
+    radius_rms: np.ndarray
+    marker_rms: float
+    cov_axis: np.ndarray
+    cov_point: np.ndarray
+    sigma_m: float
+    method: str
+    n_frames: int
+
+    def __post_init__(self) -> None:
+        for name in ("axis", "point", "template", "radii", "radius_rms", "cov_axis", "cov_point"):
+            object.__setattr__(self, name, _freeze(np.asarray(getattr(self, name), dtype=np.float64)))
+        object.__setattr__(self, "labels", tuple(self.labels))
+        P = len(self.labels)
+        if self.axis.shape != (3,) or self.point.shape != (3,) or self.template.shape != (P, 3):
+            raise InputError(None, "JointGeometry", f"axis (3,), point (3,), template ({P}, 3)",
+                             f"{self.axis.shape}, {self.point.shape}, {self.template.shape}")
+
+
+@dataclass(frozen=True, eq=False)
+class JointAngles:
+    """Per-frame link angles of one joint.
+
+    Attributes
+    ----------
+    t : (T,) float
+        Sample times, seconds (the clock of the markers they came from).
+    q : (T,) float
+        Link angle, rad, unwrapped; NaN where the frame had too few valid markers.
+    sigma_q : (T,) float
+        Cramér-Rao SD of each angle, sigma / sqrt(sum of r_p^2 over the markers used), rad.
+    marker_rms : (T,) float
+        RMS residual of the markers used in each frame, metres.
+    n_markers : (T,) int
+        Markers used in each frame (after outlier rejection).
+    n_rejected : (T,) int
+        Markers rejected as outliers in each frame.
+    """
+
+    t: np.ndarray
+    q: np.ndarray
+    sigma_q: np.ndarray
+    marker_rms: np.ndarray
+    n_markers: np.ndarray
+    n_rejected: np.ndarray
+
+    @property
+    def n_invalid(self) -> int:
+        return int(np.isnan(self.q).sum())
