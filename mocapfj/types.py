@@ -27,6 +27,7 @@ __all__ = [
     "Recording",
     "JointGeometry",
     "JointAngles",
+    "Deflection",
     "WORLD",
 ]
 
@@ -473,3 +474,39 @@ class JointAngles:
     @property
     def n_invalid(self) -> int:
         return int(np.isnan(self.q).sum())
+
+
+@dataclass(frozen=True, eq=False)
+class Deflection:
+    """Joint deflection on the controller clock at the mocap samples (docs/conventions.md).
+
+    Attributes
+    ----------
+    t : (T,) float
+        Controller-clock times of the mocap samples (declared clock offset applied), s.
+    q : (T,) float
+        Link angle from mocap with its zero aligned to the motor's (``q_offset_rad`` added), rad.
+    q_m : (T,) float
+        Motor angle / gear ratio interpolated at `t`, rad.
+    delta : (T,) float
+        q_m - q, rad; NaN where either is missing.
+    sigma_delta : (T,) float
+        Per-sample SD of delta: link-angle CRLB and motor quantisation combined, rad.
+    tau : (T,) float
+        Logged motor torque (link side) interpolated at `t`, N m.
+    q_offset_rad : float
+        Constant added to the mocap angle (the two angle zeros differ by the mounting of the
+        markers; kinematics cannot tell it from a constant spring offset, so it is set so that the
+        mean deflection is zero and identification fits the spring's offset).
+    q_m_quantum_rad : float
+        Quantum of the logged q_m estimated from its smallest step (0 if not quantised), rad.
+    """
+
+    t: np.ndarray
+    q: np.ndarray
+    q_m: np.ndarray
+    delta: np.ndarray
+    sigma_delta: np.ndarray
+    tau: np.ndarray
+    q_offset_rad: float
+    q_m_quantum_rad: float
