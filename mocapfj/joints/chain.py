@@ -1,0 +1,636 @@
+"""Per-frame angles of all revolute joints of a kinematic chain from markers on its links.
+
+Seed 000 eq. (13) fits one angle per frame by matching predicted to measured marker positions;
+here the prediction is the forward kinematics of a whole chain (or tree) read from a Pinocchio
+model, and all joint angles of a frame are fitted at once:
+
+    min_q  sum_p |v_p - y_p(q)|^2,     y_p(q) = T_world_link(p)(q) a_p
+
+with a_p the marker template in its link frame. Gauss-Newton runs batched over frames: the
+forward kinematics is re-implemented in numpy from the fixed joint placements of the model
+(checked against ``pin.forwardKinematics`` in the tests), and the Jacobian of a marker is
+dy_p/dq_j = n_j x (y_p - o_j) for the joints j upstream of its link (n_j, o_j: world axis and
+origin of joint j). Frames, units and shapes follow docs/conventions.md.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from scipy.special import erfc
+from scipy.stats import chi2
+
+from ..errors import InputError
+
+__all__ = ["ChainModel", "ChainAngles", "solve_chain"]
+
+_REVOLUTE = {"JointModelRX": (1.0, 0, 0), "JointModelRY": (0, 1.0, 0), "JointModelRZ": (0, 0, 1.0)}
+_RCOND = 1e-10      # smallest Cholesky pivot of the Jacobi-scaled normal matrix of a solvable frame
+_MAX_STEP = 0.5     # rad: Gauss-Newton steps are scaled down to at most this per joint
+_CHUNK = 1024       # frames per batch: keeps the working arrays in cache
+_CHORD = 1e-3       # rad: below this step size Gauss-Newton keeps the normal matrix (chord method)
+
+
+def _read_only(obj) -> None:
+    for value in vars(obj).values():
+        if isinstance(value, np.ndarray):
+            value.setflags(write=False)
+
+
+def _basis(axis: np.ndarray) -> np.ndarray:
+    """A rotation P (3, 3) whose third column is the unit `axis`: Rot(axis, q) = P Rz(q) P^T."""
+    z = axis / np.linalg.norm(axis)
+    x = np.cross(z, [1.0, 0, 0] if abs(z[0]) < 0.9 else [0, 1.0, 0])
+    x /= np.linalg.norm(x)
+    return np.column_stack([x, np.cross(z, x), z])
+
+
+@dataclass(frozen=True, eq=False)
+class ChainModel:
+    """Revolute joints of a Pinocchio model and the marker templates on its links.
+
+    Build it with `from_urdf` or `from_model`. Internally every joint is re-expressed in a frame
+    whose z axis is its rotation axis (Rot(n, q) = P Rz(q) P^T), so the forward kinematics is
+    products of fixed placements and Rz(q_j).
+
+    Attributes
+    ----------
+    joint_names : tuple of n str
+        Revolute joints in Pinocchio order; column j of every (T, n) angle array.
+    labels : tuple of M str
+        Marker labels in the column order `solve_chain` expects of ``v_world``.
+    marker_link : tuple of M str
+        Link frame of each marker.
+    parent : (n,) int
+        Parent joint index, -1 for the root.
+    R_parent_joint, t_parent_joint : (n, 3, 3), (n, 3)
+        Fixed placement of each (axis-aligned) joint frame in its parent's, metres.
+    P_joint : (n, 3, 3)
+        Rotation from the axis-aligned frame to the model's joint frame (column 3 = axis).
+    marker_joint : (M,) int
+        Joint that carries each marker's link (-1: fixed to the root, moved by no joint).
+    p_joint : (M, 3)
+        Marker positions in the axis-aligned frame of `marker_joint`, metres.
+    moves : (M, n) bool
+        moves[m, j]: joint j is upstream of marker m.
+    moves_joint : (n, n) bool
+        moves_joint[k, j]: joint j is joint k or upstream of it.
+    T_world_root : (4, 4)
+        Pose of the model's root (URDF ``world``) in the mocap world frame.
+    """
+
+    joint_names: tuple[str, ...]
+    labels: tuple[str, ...]
+    marker_link: tuple[str, ...]
+    parent: np.ndarray
+    R_parent_joint: np.ndarray
+    t_parent_joint: np.ndarray
+    P_joint: np.ndarray
+    marker_joint: np.ndarray
+    p_joint: np.ndarray
+    moves: np.ndarray
+    moves_joint: np.ndarray
+    T_world_root: np.ndarray
+
+    def __post_init__(self) -> None:
+        _read_only(self)
+
+    @property
+    def n_joints(self) -> int:
+        return len(self.joint_names)
+
+    @classmethod
+    def from_urdf(cls, urdf: str | Path, templates, *, T_world_root=None) -> ChainModel:
+        """From URDF text (a string starting with ``<``) or a URDF file path; see `from_model`."""
+        import pinocchio as pin
+
+        text = str(urdf)
+        model = pin.buildModelFromXML(text) if text.lstrip().startswith("<") else pin.buildModelFromUrdf(text)
+        return cls.from_model(model, templates, T_world_root=T_world_root)
+
+    @classmethod
+    def from_model(cls, model, templates: Mapping[str, tuple[Sequence[str], np.ndarray]], *,
+                   T_world_root=None) -> ChainModel:
+        """Read the fixed joint placements of a Pinocchio model once and attach marker templates.
+
+        Parameters
+        ----------
+        model : pinocchio.Model
+            Only 1-DoF revolute joints (RX, RY, RZ, RevoluteUnaligned); braked joints must be fixed.
+        templates : mapping of link frame name -> (labels (P,), positions (P, 3))
+            Marker positions in the frame of that link (a Pinocchio frame, e.g. ``"link3"``), metres.
+        T_world_root : (4, 4), optional
+            Pose of the model root in the mocap world; default identity.
+        """
+        n = model.njoints - 1
+        if n < 1:
+            raise InputError(None, "model", "a model with at least one revolute joint", "no joints")
+        parent, R_pl, t_pl, P = np.empty(n, np.int64), np.empty((n, 3, 3)), np.empty((n, 3)), np.empty((n, 3, 3))
+        for j in range(1, n + 1):
+            jm = model.joints[j]
+            kind = jm.shortname()
+            if kind in _REVOLUTE:
+                axis = np.array(_REVOLUTE[kind])
+            elif kind == "JointModelRevoluteUnaligned":
+                axis = np.asarray(jm.extract().axis, dtype=np.float64)
+            else:
+                raise InputError(None, f"joint {model.names[j]!r}", "a 1-DoF revolute joint (revolute in the URDF)",
+                                 kind, hint="continuous and prismatic joints are not supported; brake "
+                                 "(make fixed) the joints that do not move")
+            parent[j - 1] = model.parents[j] - 1
+            P[j - 1] = _basis(axis)
+            Pp = P[parent[j - 1]] if parent[j - 1] >= 0 else np.eye(3)
+            pl = model.jointPlacements[j]
+            R_pl[j - 1] = Pp.T @ pl.rotation @ P[j - 1]
+            t_pl[j - 1] = Pp.T @ pl.translation
+        if not isinstance(templates, Mapping) or not templates:
+            raise InputError(None, "templates", "a mapping link frame name -> (labels, (P, 3) positions)",
+                             "an empty mapping" if isinstance(templates, Mapping) else type(templates).__name__)
+        labels, links, mj, pj = [], [], [], []
+        for link, (lab, pos) in templates.items():
+            if not model.existFrame(link):
+                bodies = [f.name for f in model.frames if str(f.type).endswith("BODY")]
+                raise InputError(None, "templates", f"link frame names of the model, one of {bodies}", repr(link))
+            pos = np.asarray(pos, dtype=np.float64)
+            lab = [str(s) for s in lab]
+            if pos.ndim != 2 or pos.shape[1] != 3 or pos.shape[0] != len(lab) or not np.isfinite(pos).all():
+                raise InputError(None, f"templates[{link!r}]", f"finite positions of shape ({len(lab)}, 3) in m",
+                                 f"shape {pos.shape}")
+            fr = model.frames[model.getFrameId(link)]
+            k = int(fr.parentJoint) - 1
+            Pk = P[k] if k >= 0 else np.eye(3)
+            p_in_joint = pos @ fr.placement.rotation.T + fr.placement.translation
+            labels += lab
+            links += [link] * len(lab)
+            mj += [k] * len(lab)
+            pj.append(p_in_joint @ Pk)
+        if len(set(labels)) != len(labels):
+            raise InputError(None, "templates", "unique marker labels",
+                             f"duplicates {sorted({s for s in labels if labels.count(s) > 1})}")
+        mj = np.asarray(mj, np.int64)
+        up = np.eye(n, dtype=bool)                      # up[k, j]: joint j is joint k or upstream of it
+        for k in range(n):
+            if parent[k] >= 0:
+                up[k] |= up[parent[k]]
+        moves = np.where((mj >= 0)[:, None], up[mj], False)
+        T0 = np.eye(4) if T_world_root is None else np.asarray(T_world_root, dtype=np.float64)
+        if T0.shape != (4, 4):
+            raise InputError(None, "T_world_root", "a (4, 4) homogeneous transform", f"shape {T0.shape}")
+        names = tuple(str(model.names[j]) for j in range(1, n + 1))
+        for j in np.flatnonzero(~moves.any(axis=0)):
+            raise InputError(None, "templates", f"markers on a link moved by joint {names[j]!r}",
+                             "none", hint="put a marker cluster on a link after that joint")
+        chain = cls(names, tuple(labels), tuple(links), parent, R_pl, t_pl, P, mj, np.concatenate(pj), moves, up, T0)
+        chain._check_determined()
+        return chain
+
+    def _check_determined(self) -> None:
+        """Raise InputError if all markers together cannot determine every joint (zero and random poses)."""
+        q = np.hstack([np.zeros((self.n_joints, 1)), np.random.default_rng(0).uniform(-np.pi, np.pi, (self.n_joints, 3))])
+        A, _, _ = _normal(self, q, np.zeros((len(self.labels), 3, 4)), np.ones((len(self.labels), 4)))
+        if not _Factor(A).determined.any():
+            d = np.sqrt(np.maximum(np.diag(A[:, :, 0]), 1e-300))
+            _, V = np.linalg.eigh(A[:, :, 0] / np.outer(d, d))
+            j = int(np.argmax(np.abs(V[:, 0])))
+            raise InputError(None, "templates", f"markers that determine every joint angle (the least determined is "
+                             f"joint {self.joint_names[j]!r})", f"{len(self.labels)} markers", hint="markers on a joint's axis or too few "
+                             "markers after it; add markers off the axis")
+
+    def joint_poses(self, q) -> tuple[np.ndarray, np.ndarray]:
+        """World poses of the model's joint frames (Pinocchio ``data.oMi[1:]``).
+
+        Parameters
+        ----------
+        q : (T, n) float, rad
+
+        Returns
+        -------
+        R_world_joint : (T, n, 3, 3);  t_world_joint : (T, n, 3) m
+        """
+        R, t, _ = _fk(self, np.atleast_2d(np.asarray(q, dtype=np.float64)).T, with_markers=False)
+        return np.moveaxis(R[:-1], 3, 0) @ np.swapaxes(self.P_joint, 1, 2), np.moveaxis(t[:-1], 2, 0)
+
+    def marker_positions(self, q) -> np.ndarray:
+        """Predicted marker positions y_p(q), (T, M, 3) m, world frame, for angles q (T, n) rad."""
+        return np.moveaxis(_fk(self, np.atleast_2d(np.asarray(q, dtype=np.float64)).T)[2], 2, 0)
+
+
+# Internals work frame-last: q (n, F), v and y (M, 3, F), w (M, F), so that every operation is an
+# elementwise operation on contiguous length-F vectors or one BLAS call.
+
+def _fk(model: ChainModel, q: np.ndarray, with_markers: bool = True):
+    """Axis-aligned joint frames in the world, R (n+1, 3, 3, F), t (n+1, 3, F) (slot n is the
+    root), and marker positions y (M, 3, F): R_j = R_parent G_j Rz(q_j), t_j = R_parent g_j + t_parent."""
+    n, F = q.shape
+    c, s = np.cos(q), np.sin(q)
+    R = np.empty((n + 1, 3, 3, F))
+    t = np.empty((n + 1, 3, F))
+    R[n], t[n] = model.T_world_root[:3, :3, None], model.T_world_root[:3, 3, None]
+    Gg = np.concatenate([model.R_parent_joint, model.t_parent_joint[:, :, None]], axis=2)    # (n, 3, 4)
+    for j in range(n):
+        p = model.parent[j]                                               # -1 is the root slot n
+        A = Gg[j].T @ R[p]                                                # (3, 4, F): [R_p G | R_p g]
+        t[j] = A[:, 3] + t[p]
+        R[j, :, 0] = c[j] * A[:, 0] + s[j] * A[:, 1]
+        R[j, :, 1] = c[j] * A[:, 1] - s[j] * A[:, 0]
+        R[j, :, 2] = A[:, 2]
+    if not with_markers:
+        return R, t, None
+    y = np.empty((len(model.labels), 3, F))
+    for k in np.unique(model.marker_joint):
+        idx = np.flatnonzero(model.marker_joint == k)
+        y[idx] = np.swapaxes(model.p_joint[idx] @ R[k], 0, 1) + t[k][None]
+    return R, t, y
+
+
+def _cross(a, b):
+    """Cross product along axis 1 of (K, 3, F) arrays."""
+    return np.stack([a[:, 1] * b[:, 2] - a[:, 2] * b[:, 1], a[:, 2] * b[:, 0] - a[:, 0] * b[:, 2],
+                     a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]], axis=1)
+
+
+def _subtree_sums(model: ChainModel, X: np.ndarray) -> np.ndarray:
+    """Sums of X (M, K, F) over the markers each joint moves, (n, K, F): per link group, then
+    accumulated from the leaves to the root (no BLAS: threaded tiny products stall on busy cores)."""
+    out = np.zeros((model.n_joints,) + X.shape[1:])
+    for k in np.unique(model.marker_joint[model.marker_joint >= 0]):
+        out[k] = X[model.marker_joint == k].sum(axis=0)
+    for j in range(model.n_joints - 1, -1, -1):
+        if model.parent[j] >= 0:
+            out[model.parent[j]] += out[j]
+    return out
+
+
+def _normal(model: ChainModel, q, v, w, with_A: bool = True):
+    """Gauss-Newton normal equations of seed 000 eq. (13) with marker weights w (M, F).
+
+    A = J^T W J and b = J^T W (v - y), with J_mj = n_j x (y_m - o_j) for the joints j upstream of
+    marker m (n_j, o_j: world axis and origin of joint j), are summed from marker moments instead
+    of forming J: with d_j = y - o_j and (a x b).(c x d) = (a.c)(b.d) - (a.d)(b.c),
+    A_jk = (n_j.n_k) sum d_j.d_k - sum (n_j.d_k)(n_k.d_j) over the markers moved by both joints,
+    which needs only sum 1, sum y and sum y y^T of those markers; b_j = n_j . sum d_j x r.
+    Coordinates are centred on the frame's mean marker to limit cancellation.
+
+    Returns A (n, n, F) (None unless `with_A`), b (n, F) and the residuals r (M, 3, F) = v - y.
+    """
+    R, t, y = _fk(model, q)
+    n, F = q.shape
+    M = y.shape[0]
+    r = v - y
+    cen = y.mean(axis=0)
+    yc = y - cen
+    o = t[:n] - cen                                                       # (n, 3, F) joint origins
+    nz = R[:n, :, 2]                                                      # (n, 3, F) world axes
+    rw = r * w[:, None]
+    yr = _subtree_sums(model, np.concatenate([_cross(yc, rw), rw], axis=1))
+    b = (nz * (yr[:, :3] - _cross(o, yr[:, 3:]))).sum(1)                 # (n, F); yr: sums of y x r, r
+    if not with_A:
+        return None, b, r
+    feat = np.empty((M, 10, F))                           # w [1, y, yx yx, yy yy, yz yz, yx yy, yx yz, yy yz]
+    feat[:, 0] = w
+    feat[:, 1:4] = yc * w[:, None]
+    feat[:, 4:7] = feat[:, 1:4] * yc
+    feat[:, 7:9] = feat[:, 1:2] * yc[:, 1:3]
+    feat[:, 9] = feat[:, 2] * yc[:, 2]
+    mom = _subtree_sums(model, feat)                                      # (n, 10, F)
+    jj, kk = np.triu_indices(n)                                           # pairs j <= k; A is symmetric
+    up = model.moves_joint
+    rel = up[kk, jj] | up[jj, kk]                                         # markers moved by both: those of
+    mp = mom[np.where(up[kk, jj], kk, jj)]                                # the deeper joint (none if unrelated)
+    if not rel.all():
+        mp[~rel] = 0.0
+    N, S, Qd, Qo = mp[:, 0], mp[:, 1:4], mp[:, 4:7], mp[:, 7:10]
+    oJ, oK, nJ, nK = o[jj], o[kk], nz[jj], nz[kk]                        # (P, 3, F)
+    D = Qd.sum(1) - (S * (oJ + oK)).sum(1) + N * (oJ * oK).sum(1)        # sum d_j . d_k
+    nQn = ((nJ * nK * Qd).sum(1) + Qo[:, 0] * (nJ[:, 0] * nK[:, 1] + nJ[:, 1] * nK[:, 0])
+           + Qo[:, 1] * (nJ[:, 0] * nK[:, 2] + nJ[:, 2] * nK[:, 0]) + Qo[:, 2] * (nJ[:, 1] * nK[:, 2] + nJ[:, 2] * nK[:, 1]))
+    nj_ok, nk_oj = (nJ * oK).sum(1), (nK * oJ).sum(1)
+    E = nQn - (S * nJ).sum(1) * nk_oj - nj_ok * (S * nK).sum(1) + N * nj_ok * nk_oj   # sum (n_j.d_k)(n_k.d_j)
+    A = np.empty((n, n, F))
+    A[jj, kk] = A[kk, jj] = (nJ * nK).sum(1) * D - E
+    return A, b, r
+
+
+class _Factor:
+    """Cholesky factor of the Jacobi-scaled normal matrices C = S A S (S = diag(A)^-1/2) of many
+    frames, computed elementwise over frames (A (n, n, F)); a 1e-12 ridge keeps frames that do not
+    determine every joint finite. `determined`: all diag(A) > 0 and every pivot of C > _RCOND."""
+
+    def __init__(self, A: np.ndarray):
+        n = A.shape[0]
+        d = np.einsum("jjf->jf", A)
+        self.s = 1.0 / np.sqrt(np.where(d > 0, d, 1.0))
+        C = A * self.s[:, None] * self.s[None, :]
+        L = np.zeros_like(C)
+        piv = np.empty_like(d)
+        for j in range(n):
+            piv[j] = C[j, j] + 1e-12 - (L[j, :j] ** 2).sum(0)
+            L[j, j] = np.sqrt(np.maximum(piv[j], 1e-300))
+            for i in range(j + 1, n):
+                L[i, j] = (C[i, j] - (L[i, :j] * L[j, :j]).sum(0)) / L[j, j]
+        self.L, self.piv = L, piv
+        self.determined = (d > 0).all(axis=0) & (piv.min(axis=0) > _RCOND)
+
+    def take(self, idx) -> _Factor:
+        """The factors of frames `idx`."""
+        f = object.__new__(_Factor)
+        f.s, f.L, f.piv, f.determined = self.s[:, idx], self.L[..., idx], self.piv[:, idx], self.determined[idx]
+        return f
+
+    def solve(self, b: np.ndarray) -> np.ndarray:
+        """x (n, F) with A x = b (n, F)."""
+        L, n = self.L, self.L.shape[0]
+        z = np.empty_like(b)
+        for j in range(n):
+            z[j] = (b[j] * self.s[j] - (L[j, :j] * z[:j]).sum(0)) / L[j, j]
+        for j in range(n - 1, -1, -1):
+            z[j] = (z[j] - (L[j + 1:, j] * z[j + 1:]).sum(0)) / L[j, j]
+        return z * self.s
+
+    def inv_diag(self) -> np.ndarray:
+        """diag(A^-1), (n, F): squared column norms of L^-1, scaled back."""
+        L, n = self.L, self.L.shape[0]
+        X = np.zeros_like(L)                                              # X = L^-1, lower triangular
+        for j in range(n):
+            X[j, j] = 1.0 / L[j, j]
+            for i in range(j + 1, n):
+                X[i, j] = -(L[i, j:i] * X[j:i, j]).sum(0) / L[i, i]
+        return (X * X).sum(0) * self.s**2
+
+
+def _chunks(F: int):
+    return (slice(i, min(F, i + _CHUNK)) for i in range(0, F, _CHUNK))
+
+
+def _gauss_newton(model, q, v, w, max_iter, tol):
+    """Batched Gauss-Newton from q (n, F) on v (M, 3, F), w (M, F), in cache-sized chunks of frames;
+    only unconverged frames are re-evaluated. Steps solve the Jacobi-scaled normal equations and
+    are scaled down to at most _MAX_STEP rad. Once a frame's step is below _CHORD rad its normal
+    matrix is kept (chord method: the contraction rate stays ~|dq|, and each step then needs only
+    the forward kinematics and J^T r).
+
+    Returns q (n, F), iterations (F,), converged (F,) (last step max |dq| < tol rad), the normal
+    matrix A (n, n, F) of each frame's last full evaluation (within ~_CHORD^2 rad of q) and the
+    squared residuals w |r|^2 (M, F) of its last evaluation (at q for frames not converged).
+    """
+    q = q.copy()
+    n, F = q.shape
+    n_it = np.zeros(F, np.int64)
+    conv = np.zeros(F, bool)
+    A_last = np.empty((n, n, F))
+    e2 = np.empty(w.shape)
+    for sl in _chunks(F):
+        act = np.arange(sl.start, sl.stop)                                # frames still iterating
+        fac = None                                                        # factors of the chunk's frames
+        prev = np.full(act.size, np.inf)                                  # last step of each frame
+        for _ in range(max_iter):
+            if act.size == 0:
+                break
+            dq = np.empty((n, act.size))
+            full = prev > _CHORD
+            for sel in (np.flatnonzero(full), np.flatnonzero(~full)):
+                if sel.size == 0:
+                    continue
+                a = act[sel]
+                A, b, r = _normal(model, q[:, a], v[..., a], w[:, a], with_A=bool(full[sel[0]]))
+                e2[:, a] = (r * r).sum(axis=1) * w[:, a]
+                if A is not None:
+                    A_last[..., a] = A
+                    f = _Factor(A)
+                    if fac is None:                                       # first iteration: every frame
+                        fac = f
+                    else:
+                        fac.L[..., a - sl.start], fac.s[:, a - sl.start] = f.L, f.s
+                else:
+                    f = fac.take(a - sl.start)
+                dq[:, sel] = f.solve(b)
+            step = np.abs(dq).max(axis=0)
+            dq *= np.minimum(1.0, _MAX_STEP / np.maximum(step, 1e-300))
+            q[:, act] += dq
+            n_it[act] += 1
+            done = step < tol
+            conv[act[done]] = True
+            act, prev = act[~done], step[~done]
+    if not conv.all():
+        A_last[..., ~conv], e2[:, ~conv] = _evaluate(model, q[:, ~conv], v[..., ~conv], w[:, ~conv])
+    return q, n_it, conv, A_last, e2
+
+
+def _evaluate(model, q, v, w):
+    """Normal matrix A (n, n, F) and weighted squared marker residuals w |v - y|^2 (M, F), chunked."""
+    F = q.shape[1]
+    A = np.empty((q.shape[0], q.shape[0], F))
+    e2 = np.empty(w.shape)
+    for sl in _chunks(F):
+        A[..., sl], _, r = _normal(model, q[:, sl], v[..., sl], w[:, sl])
+        e2[:, sl] = (r * r).sum(axis=1) * w[:, sl]
+    return A, e2
+
+
+@dataclass(frozen=True, eq=False)
+class ChainAngles:
+    """Per-frame joint angles of a chain (`solve_chain`).
+
+    Attributes
+    ----------
+    t : (T,) float or None
+        Sample times, seconds, when given.
+    q : (T, n) float
+        Joint angles, rad, columns `joint_names`; NaN rows where the frame could not determine
+        every joint.
+    sigma_q : (T, n) float
+        SD of each angle from the Gauss-Newton covariance sigma^2 (J^T J)^-1 at the solution
+        (the Cramér-Rao bound for isotropic Gaussian marker noise), rad.
+    marker_rms : (T,) float
+        RMS of the 3D residuals |v_p - y_p| of the markers used, metres (at the last Gauss-Newton
+        evaluation, within `tol` of q).
+    n_markers, n_rejected : (T,) int
+        Markers used, and markers rejected as outliers, per frame.
+    used : (T, M) bool
+        Which markers (``model.labels`` order) each frame used.
+    n_iter : (T,) int
+        Gauss-Newton iterations of each frame (all rounds).
+    converged : (T,) bool
+        The last step was below `tol` (False on NaN rows).
+    sigma_m : float
+        Marker noise SD used for sigma_q (given, or estimated from the inlier residuals), metres.
+    joint_names : tuple of n str
+    """
+
+    t: np.ndarray | None
+    q: np.ndarray
+    sigma_q: np.ndarray
+    marker_rms: np.ndarray
+    n_markers: np.ndarray
+    n_rejected: np.ndarray
+    used: np.ndarray
+    n_iter: np.ndarray
+    converged: np.ndarray
+    sigma_m: float
+    joint_names: tuple[str, ...]
+
+    def __post_init__(self) -> None:
+        _read_only(self)
+
+    @property
+    def n_invalid(self) -> int:
+        """Frames with a NaN row."""
+        return int(np.isnan(self.q[:, 0]).sum())
+
+
+def _check(v_world, model, q0, sigma, t):
+    v = np.asarray(v_world, dtype=np.float64)
+    M = len(model.labels)
+    if v.ndim != 3 or v.shape[1:] != (M, 3) or v.shape[0] < 1:
+        raise InputError(None, "v_world", f"marker positions of shape (T, {M}, 3) in model.labels order", f"shape {v.shape}")
+    if not np.isfinite(v).all(axis=2).any():
+        raise InputError(None, "v_world", "at least one frame with markers", "all NaN",
+                         hint="check that the marker labels match the recording")
+    T, n = v.shape[0], model.n_joints
+    if q0 is not None:
+        q0 = np.asarray(q0, dtype=np.float64)
+        if q0.shape not in ((n,), (T, n)) or not np.isfinite(q0).all():
+            raise InputError(None, "q0", f"finite seed angles of shape ({n},) or ({T}, {n}) in rad",
+                             f"shape {q0.shape}" if q0.shape not in ((n,), (T, n)) else "non-finite values",
+                             hint="interpolate the motor angles onto the mocap times")
+    if sigma is not None and not (np.isfinite(sigma) and sigma > 0):
+        raise InputError(None, "sigma", "a positive marker noise SD in metres, or None to estimate it", sigma)
+    if t is not None and np.shape(t) != (T,):
+        raise InputError(None, "t", f"shape ({T},)", f"shape {np.shape(t)}")
+    return v, q0
+
+
+def _require_some(ok: np.ndarray) -> None:
+    if not ok.any():
+        raise InputError(None, "v_world", "at least one frame whose markers determine every joint",
+                         f"none of {ok.size} frames", hint="too many markers missing; check labels and occlusion")
+
+
+def solve_chain(model: ChainModel, v_world, *, t=None, q0=None, sigma: float | None = None, max_iter: int = 10,
+                tol: float = 1e-10, outlier_sigma: float | None = 4.0, min_markers_per_link: int = 1,
+                block_frames: int = 32) -> ChainAngles:
+    """Joint angles of every frame by batched Gauss-Newton on seed 000 eq. (13) over the chain.
+
+    Parameters
+    ----------
+    model : ChainModel
+    v_world : (T, M, 3) float
+        Measured marker positions, metres, world frame, columns in ``model.labels`` order; NaN
+        where missing.
+    t : (T,) float, optional
+        Sample times, copied to the result.
+    q0 : (T, n) or (n,) float, optional
+        Seeds, rad. (T, n), e.g. the motor angles: every frame starts from its own row and all
+        frames are solved at once. (n,) or None (zeros): a seeding pass runs in blocks of
+        `block_frames` frames, each block seeded by linear extrapolation of the block before it
+        (the first block from q0 with up to 5 x max_iter iterations) -- seed 000 seeds each
+        frame with the previous one; blocks keep that idea vectorised, at ~10x the cost of
+        per-frame seeds. It assumes the first pose is within about 1 rad of q0 and that the
+        extrapolation errs by less than about 0.5 rad within a block.
+    sigma : float, optional
+        Marker noise SD per coordinate, metres. None: robustly estimated (median residual) for
+        the outlier test, then from the inliers' residual sum of squares over 3 M - n per frame.
+    max_iter, tol : int, float
+        Gauss-Newton iterations and step tolerance (rad) per solve.
+    outlier_sigma : float or None
+        A marker whose |residual|^2 / sigma^2 exceeds the chi-square(3) quantile of the two-sided
+        Gaussian tail beyond this many SDs (4: 22.06) is rejected, worst marker first, and the frame
+        re-solved until none is left. None disables it.
+    min_markers_per_link : int
+        A link whose cluster has fewer valid markers in a frame is not used in that frame.
+
+    Returns
+    -------
+    ChainAngles
+        Frames whose remaining markers do not determine every joint (normal matrix of rank < n)
+        get NaN rows (`n_invalid`).
+    """
+    v, q0 = _check(v_world, model, q0, sigma, t)
+    if max_iter < 1 or not tol >= 0 or min_markers_per_link < 1 or block_frames < 1:
+        raise InputError(None, "max_iter/tol/min_markers_per_link/block_frames", "max_iter >= 1, tol >= 0, "
+                         "min_markers_per_link >= 1, block_frames >= 1",
+                         f"{max_iter}, {tol}, {min_markers_per_link}, {block_frames}")
+    T, n = v.shape[0], model.n_joints
+    groups = [np.array([lk == name for lk in model.marker_link]) for name in sorted(set(model.marker_link))]
+
+    def usable(wt):  # drop clusters with fewer than min_markers_per_link markers; wt (M, F) 0/1
+        if min_markers_per_link > 1:
+            for g in groups:
+                wt[g] *= wt[g].sum(axis=0) >= min_markers_per_link
+        return wt
+
+    def solvable(wt):  # every joint moves at least one used marker
+        return (_subtree_sums(model, wt[:, None, :])[:, 0] > 0).all(axis=0)
+
+    valid = np.isfinite(v).all(axis=2).T                                                        # (M, T)
+    v = np.moveaxis(np.where(np.isfinite(v), v, 0.0), 0, 2)                                     # (M, 3, T)
+    w = usable(valid.astype(float))
+    ok = solvable(w)
+    _require_some(ok)
+    q = np.zeros((n, T))
+    n_it = np.zeros(T, np.int64)
+    conv = np.zeros(T, bool)
+    if q0 is None or q0.ndim == 1:               # seeding pass in blocks, extrapolated from the last one
+        last, i_last, vel = (np.zeros(n) if q0 is None else q0), 0, np.zeros(n)
+        for i0 in range(0, T, block_frames):
+            idx = np.arange(i0, min(T, i0 + block_frames))[ok[i0:i0 + block_frames]]
+            if idx.size:
+                seed = last[:, None] + vel[:, None] * (idx - i_last)
+                qb, _, _, Ab, _ = _gauss_newton(model, seed, v[..., idx], w[:, idx],
+                                                max_iter * (5 if i0 == 0 else 1), 1e-6)
+                q[:, idx] = qb
+                det = np.flatnonzero(_Factor(Ab).determined)
+                if det.size:
+                    last, i_last = qb[:, det[-1]], idx[det[-1]]
+                    vel = (last - qb[:, det[0]]) / max(i_last - idx[det[0]], 1)
+    else:
+        q[:] = q0.T
+    A, e2 = np.zeros((n, n, T)), np.zeros((len(model.labels), T))
+    q[:, ok], n_it[ok], conv[ok], A[..., ok], e2[:, ok] = _gauss_newton(model, q[:, ok], v[..., ok], w[:, ok],
+                                                                         max_iter, tol)
+    n_rej = np.zeros(T, np.int64)
+    if outlier_sigma is not None:
+        s_rob = sigma
+        if s_rob is None:
+            use = (w > 0) & ok
+            n_used = w.sum(axis=0)[ok]
+            s_rob = np.sqrt(np.median(e2[use]) / chi2.ppf(0.5, 3) * 3 * n_used.sum() / max((3 * n_used - n).sum(), 1))
+        thr = chi2.isf(erfc(outlier_sigma / np.sqrt(2.0)), 3) * max(s_rob, 1e-300) ** 2
+        while True:                                                       # worst marker first, re-solve
+            worst = np.argmax(e2, axis=0)
+            bad = np.flatnonzero(e2[worst, np.arange(T)] > thr)
+            if bad.size == 0:
+                break
+            w[worst[bad], bad] = 0.0
+            w[:, bad] = usable(w[:, bad])
+            n_rej[bad] += 1
+            ok[bad] &= solvable(w[:, bad])
+            bad = bad[ok[bad]]
+            e2[:, ~ok] = 0.0
+            if bad.size:
+                q[:, bad], it, conv[bad], A[..., bad], e2[:, bad] = _gauss_newton(
+                    model, q[:, bad], v[..., bad], w[:, bad], max_iter, tol)
+                n_it[bad] += it
+
+    fac = _Factor(A)
+    ok &= fac.determined
+    _require_some(ok)
+    n_used = w.sum(axis=0)
+    rss = e2.sum(axis=0)
+    dof = 3 * n_used - n
+    if sigma is None:
+        good = ok & (dof > 0)
+        if not good.any():
+            raise InputError(None, "v_world", f"a frame with more than {n / 3:g} markers to estimate the noise",
+                             f"at most {int(n_used.max())} markers", hint="pass sigma= (marker noise SD in metres)")
+        sigma = float(np.sqrt(rss[good].sum() / dof[good].sum()))
+    sigma_q = sigma * np.sqrt(fac.inv_diag().T)
+    rms = np.sqrt(rss / np.maximum(n_used, 1))
+    q = q.T.copy()
+    q[~ok], sigma_q[~ok], rms[~ok], conv[~ok] = np.nan, np.nan, np.nan, False
+    return ChainAngles(t=None if t is None else np.asarray(t, dtype=np.float64), q=q, sigma_q=sigma_q,
+                       marker_rms=rms, n_markers=n_used.astype(np.int64), n_rejected=n_rej, used=(w > 0).T, n_iter=n_it,
+                       converged=conv, sigma_m=float(sigma), joint_names=model.joint_names)
