@@ -21,7 +21,6 @@ PLANNED = [
     ("calibrate-camera", "calibrate camera intrinsics from board views"),
     ("calibrate-rig", "calibrate a multi-camera rig (board or wand)"),
     ("triangulate", "2D detections to labelled 3D marker trajectories"),
-    ("joints", "joint axes, link angles and deflections from markers"),
     ("identify", "two-step identification of joint dynamics"),
     ("frf", "multisine frequency response estimation"),
     ("discover", "locate, name and model what the simulation misses"),
@@ -93,6 +92,29 @@ def _cmd_simulate(args) -> int:
     return 0
 
 
+def _cmd_joints(args) -> int:
+    from .pipeline import run_joints
+
+    s = run_joints(args.recording, args.out, method=args.method)
+
+    def human(s):
+        lines = [f"recording {s['recording']}: joint geometry ({s['method']})"]
+        for j in s["joints"]:
+            lines.append(
+                f"  joint {j['name']} ({j['method']}): axis [{', '.join(f'{x:+.4f}' for x in j['axis'])}], point "
+                f"[{', '.join(f'{x:.4f}' for x in j['point_m'])}] m, radii {', '.join(f'{r:.1f}' for r in j['radii_mm'])} mm "
+                f"(RMS {max(j['radius_rms_mm']):.2f} mm), marker RMS {j['marker_rms_mm']:.2f} mm")
+            lines.append(
+                f"    angle SD {j['angle_sigma_rad'] * 1e3:.3f} mrad over {j['q_range_deg']:.1f} deg, "
+                f"{j['n_frames']} frames ({j['n_frames_invalid']} without an angle), deflection RMS "
+                f"{j['deflection_rms_rad'] * 1e3:.3f} mrad")
+        lines.append(f"  wrote {args.out} (<joint>.joint.toml, <joint>.angles.csv, joints.json)")
+        return "\n".join(lines)
+
+    _emit(args, s, human)
+    return 0
+
+
 def _cmd_inspect(args) -> int:
     from .pipeline import inspect_path
 
@@ -133,6 +155,14 @@ def build_parser() -> argparse.ArgumentParser:
                     help="also write images/: board calibration views and a blob clip, with their truth")
     sm.add_argument("--json", action="store_true", help="print a JSON summary on stdout")
     sm.set_defaults(func=_cmd_simulate)
+
+    jn = sub.add_parser("joints", help="joint axes, link angles and deflections from markers")
+    jn.add_argument("recording", help="recording bundle directory or recording.toml")
+    jn.add_argument("--out", required=True, help="output directory")
+    jn.add_argument("--method", default="auto", choices=["auto", "ml", "halvorsen", "gamage_lasenby", "sara"],
+                    help="axis fit (default auto: maximum likelihood when the parent is still, SARA when it moves)")
+    jn.add_argument("--json", action="store_true", help="print a JSON summary on stdout")
+    jn.set_defaults(func=_cmd_joints)
 
     i = sub.add_parser("inspect", help="check and summarise a recording bundle or a C3D/TRC file")
     i.add_argument("recording", help="bundle directory, recording.toml, or marker file")

@@ -152,3 +152,208 @@ def _write_images(scn, sr, out: Path) -> int:
     layout = _layout(scn, pa10_geometry(), _rngs(scn)[0])
     write_blob_clip(out, sr.recording.rig, layout, q_full, rng)
     return len(truth["images"]) + q_full.shape[0] * len(sr.recording.rig.cameras)
+
+
+STATIC_PARENT_SD_M = 1e-3
+"""A parent cluster whose markers move less than this (SD over the trial, metres) is static (a
+braked link): one pose fitted over all frames is used, so the parent adds no per-frame noise."""
+
+
+def markers_in_parent_frame(v_link: np.ndarray, v_parent: np.ndarray | None
+                            ) -> tuple[np.ndarray, np.ndarray | None, bool]:
+    """Link markers (T, P, 3) expressed in the parent cluster's frame.
+
+    Returns the markers in the parent frame, the parent's template (None for the world) and
+    whether the parent was found static. A parent cluster is located per frame by a rigid fit
+    (Kabsch) to its template; when it does not move (`STATIC_PARENT_SD_M`), one pose fitted over
+    all frames is used so that it adds no per-frame noise.
+    """
+    from .joints.segments import cluster_template, kabsch, to_parent_frame
+
+    if v_parent is None:
+        return v_link, None, True
+    template = cluster_template(v_parent)
+    static = bool(np.nanmax(np.nanstd(v_parent, axis=0)) < STATIC_PARENT_SD_M)
+    if static:
+        R, t, _ = kabsch(template, np.nanmean(v_parent, axis=0)[None])
+        R, t = np.broadcast_to(R, (v_link.shape[0], 3, 3)), np.broadcast_to(t, (v_link.shape[0], 3))
+    else:
+        R, t, _ = kabsch(template, v_parent)
+    return to_parent_frame(v_link, R, t), template, static
+
+
+def joint_frame_markers(rec: Recording, spec) -> tuple[np.ndarray, np.ndarray | None, bool]:
+    """A recording joint's link markers in its parent's frame (`markers_in_parent_frame`)."""
+    v = rec.markers.select(spec.link_markers)
+    return markers_in_parent_frame(v, None if spec.parent_is_world else rec.markers.select(spec.parent_markers))
+
+
+def fit_sara_geometry(v: np.ndarray, labels) -> "JointGeometry":
+    """A hinge from the motion of the link cluster as a rigid body in the parent frame (SARA).
+
+    For joints between two moving segments, where the markers also move in ways a hinge does not
+    (skin, pronation of a forearm): the axis comes from the cluster's rotations (Ehrig 2007),
+    which such motion disturbs far less than marker positions. The template is the cluster at
+    its first complete frame. `cov_axis` and `cov_point` are NaN: judge the axis by refitting on
+    parts of the trial.
+    """
+    from .joints import cluster_template, fit_sara, kabsch, predict_markers
+    from .types import JointGeometry
+
+    tmpl = cluster_template(v)
+    R, t, _ = kabsch(tmpl, v)
+    n_frames = R.shape[0]
+    axis_i, _, c_i, _ = fit_sara(np.broadcast_to(np.eye(3), (n_frames, 3, 3)), np.zeros((n_frames, 3)), R, t)
+    axis = axis_i / np.linalg.norm(axis_i)
+    complete = np.flatnonzero(~np.isnan(v[..., 0]).any(axis=1))
+    if complete.size == 0:
+        raise InputError(None, "v", "a frame in which every link marker is seen", "none")
+    ref = v[complete[0]]
+    centroid = np.nanmean(v.reshape(-1, 3), axis=0)
+    point = c_i + ((centroid - c_i) @ axis) * axis
+    template = ref - point
+    radii = np.linalg.norm(template - np.outer(template @ axis, axis), axis=1)
+    nan33 = np.full((3, 3), np.nan)
+    geometry = JointGeometry(axis=axis, point=point, template=template, labels=tuple(labels), radii=radii,
+                             radius_rms=np.zeros(len(labels)), marker_rms=float("nan"), cov_axis=nan33,
+                             cov_point=nan33, sigma_m=float("nan"), method="sara", n_frames=int(np.isfinite(R[:, 0, 0]).sum()))
+    # residuals of the hinge through the cluster's own motion
+    rel = v - point
+    dist = np.linalg.norm(rel - (rel @ axis)[..., None] * axis, axis=-1)
+    radius_rms = np.sqrt(np.nanmean((dist - radii) ** 2, axis=0))
+    R_ref = R[np.flatnonzero(np.isfinite(R[:, 0, 0]))[0]]
+    q = _twist(np.einsum("tij,kj->tik", R, R_ref), axis)
+    resid = v - predict_markers(geometry, np.where(np.isfinite(q), q, 0.0))
+    marker_rms = float(np.sqrt(np.nanmean(np.where(np.isfinite(q)[:, None, None], resid, np.nan) ** 2) * 3))
+    from dataclasses import replace
+
+    return replace(geometry, radius_rms=radius_rms, marker_rms=marker_rms, sigma_m=marker_rms / np.sqrt(3))
+
+
+def _twist(R: np.ndarray, axis: np.ndarray) -> np.ndarray:
+    """Twist angle about `axis` of each rotation R (T, 3, 3) (swing-twist split), unwrapped, rad."""
+    ok = np.isfinite(R[:, 0, 0])
+    w = 1.0 + R[:, 0, 0] + R[:, 1, 1] + R[:, 2, 2]  # 4 qw^2
+    vx, vy, vz = R[:, 2, 1] - R[:, 1, 2], R[:, 0, 2] - R[:, 2, 0], R[:, 1, 0] - R[:, 0, 1]  # 4 qw qv
+    q = 2.0 * np.arctan2(vx * axis[0] + vy * axis[1] + vz * axis[2], w)
+    q[ok] = np.unwrap(q[ok])
+    q[~ok] = np.nan
+    return q
+
+
+def sara_angles(v: np.ndarray, geometry, t) -> "JointAngles":
+    """Angles of a SARA joint: the twist about its axis of the link cluster's rigid rotation.
+
+    The cluster (its template in the parent frame) is fitted to each frame (Kabsch); frames with
+    fewer than 3 markers are NaN. sigma_q is sigma_m / sqrt(sum of r_p^2 over the markers seen).
+    """
+    from .joints import kabsch, predict_markers
+    from .types import JointAngles
+
+    R, _, _ = kabsch(geometry.point + geometry.template, v)
+    q = _twist(R, geometry.axis)
+    seen = ~np.isnan(v[..., 0])
+    valid = np.isfinite(q)
+    r2 = (np.where(seen, geometry.radii**2, 0.0)).sum(axis=1)
+    sigma_q = np.where(valid, geometry.sigma_m / np.sqrt(np.maximum(r2, 1e-300)), np.nan)
+    resid = np.linalg.norm(v - predict_markers(geometry, np.where(valid, q, 0.0)), axis=-1)
+    sq = np.where(seen & valid[:, None], resid, 0.0) ** 2
+    marker_rms = np.where(valid, np.sqrt(sq.sum(axis=1) / np.maximum(seen.sum(axis=1), 1)), np.nan)
+    n = np.where(valid, seen.sum(axis=1), 0)
+    return JointAngles(t=np.asarray(t, float), q=q, sigma_q=sigma_q, marker_rms=marker_rms, n_markers=n,
+                       n_rejected=np.zeros_like(n))
+
+
+def calibrate_joint(v: np.ndarray, labels, t: np.ndarray, method: str = "ml"):
+    """Fit a joint's geometry from its markers in the parent frame and solve its angles.
+
+    Returns (JointGeometry, JointAngles). `method`: "ml" (maximum likelihood seeded by the
+    bias-compensated fit), "halvorsen", "gamage_lasenby" or "sara" (`fit_sara_geometry`).
+    """
+    from .joints.axis import fit_gamage_lasenby, fit_halvorsen, fit_hinge_ml
+
+    if method == "gamage_lasenby":
+        geometry = fit_gamage_lasenby(v, labels=labels)
+    elif method == "halvorsen":
+        geometry = fit_halvorsen(v, labels=labels)
+    elif method == "ml":
+        geometry, _ = fit_hinge_ml(v, labels=labels, init=fit_halvorsen(v, labels=labels))
+    elif method == "sara":
+        geometry = fit_sara_geometry(v, labels)
+    else:
+        raise InputError(None, "method", '"ml", "halvorsen", "gamage_lasenby" or "sara"', repr(method))
+    return geometry, calibrate_joint_angles(v, geometry, t)
+
+
+def calibrate_joint_angles(v, geometry, t):
+    """Angles of a joint with a given geometry (as `calibrate_joint` solves them for its method)."""
+    from .joints.angles import joint_angles
+
+    if geometry.method == "sara":
+        return sara_angles(v, geometry, t)
+    return joint_angles(v, geometry, t)
+
+
+def _flip(geometry):
+    from dataclasses import replace
+
+    return replace(geometry, axis=-geometry.axis)
+
+
+def run_joints(recording: str | Path, out: str | Path, method: str = "auto") -> dict:
+    """Joint geometry, link angles and deflections of every joint of a recording (``mocapfj joints``).
+
+    Writes OUT/<joint>.joint.toml (the cluster calibration), OUT/<joint>.angles.csv (per mocap
+    sample: times, q, sigma_q, q_m, delta, sigma_delta, tau, markers used, marker RMS) and
+    OUT/joints.json (the summary printed by --json). `method` "auto" fits a joint whose parent is
+    the world or does not move by maximum likelihood, and one whose parent moves by SARA
+    (`fit_sara_geometry`); or name one method for every joint.
+    """
+    from .io import write_csv_columns
+    from .io.geometry import write_joint_geometry
+    from .joints.sync import deflection
+
+    rec = load_recording(recording)
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    joints = []
+    for i, spec in enumerate(rec.joints):
+        v, parent_template, static_parent = joint_frame_markers(rec, spec)
+        how = method if method != "auto" else ("ml" if static_parent else "sara")
+        geometry, angles = calibrate_joint(v, spec.link_markers, rec.markers.t, how)
+        d = deflection(angles, rec.controller, i, rec.clock_offset_s)
+        ok = np.isfinite(d.delta)
+        if ok.sum() > 2 and np.corrcoef(angles.q[ok], d.q_m[ok])[0, 1] < 0:
+            # the axis sign is a convention: link and motor angles increase together
+            geometry = _flip(geometry)
+            angles = calibrate_joint_angles(v, geometry, rec.markers.t)
+            d = deflection(angles, rec.controller, i, rec.clock_offset_s)
+        write_joint_geometry(out / f"{spec.name}.joint.toml", spec.name, geometry,
+                             "world" if spec.parent_is_world else spec.parent_markers, parent_template,
+                             extra={"recording": rec.name, "q_offset_rad": d.q_offset_rad})
+        write_csv_columns(out / f"{spec.name}.angles.csv", {
+            "t_mocap": angles.t, "t_controller": d.t, "q": d.q, "sigma_q": angles.sigma_q, "q_m": d.q_m,
+            "delta": d.delta, "sigma_delta": d.sigma_delta, "tau": d.tau, "n_markers": angles.n_markers,
+            "n_rejected": angles.n_rejected, "marker_rms": angles.marker_rms})
+        valid = np.isfinite(angles.q)
+        joints.append({
+            "name": spec.name,
+            "axis": geometry.axis,
+            "point_m": geometry.point,
+            "radii_mm": geometry.radii * 1e3,
+            "radius_rms_mm": geometry.radius_rms * 1e3,
+            "marker_rms_mm": float(np.sqrt(np.nanmean(angles.marker_rms**2)) * 1e3),
+            "angle_sigma_rad": float(np.nanmedian(angles.sigma_q)),
+            "n_frames": int(angles.q.size),
+            "n_frames_invalid": int((~valid).sum()),
+            "method": geometry.method,
+            "q_range_deg": float(np.degrees(np.nanmax(angles.q) - np.nanmin(angles.q))) if valid.any() else None,
+            "q_offset_rad": d.q_offset_rad,
+            "deflection_rms_rad": float(np.sqrt(np.nanmean((d.delta - np.nanmean(d.delta)) ** 2))),
+            "q_m_quantum_rad": d.q_m_quantum_rad,
+            "parent_static": static_parent,
+            "files": {"geometry": f"{spec.name}.joint.toml", "angles": f"{spec.name}.angles.csv"},
+        })
+    summary = {"recording": rec.name, "method": method, "joints": joints}
+    write_json(out / "joints.json", summary)
+    return summary

@@ -410,9 +410,11 @@ class JointGeometry:
     marker_rms : float
         RMS of the marker residuals of the fit, metres.
     cov_axis : (3, 3) float
-        Covariance of `axis` (rank 2: tilt), rad^2.
+        Uncertainty of `axis` (rank 2: tilt), rad^2: the covariance from the Fisher information
+        for the maximum-likelihood fit; for the algebraic fits a parametric-bootstrap mean-square
+        error, which includes their bias (NaN when the bootstrap was switched off).
     cov_point : (3, 3) float
-        Covariance of `point` (rank 2: in the plane normal to the axis), m^2.
+        Uncertainty of `point` (rank 2: in the plane normal to the axis), m^2, as for `cov_axis`.
     sigma_m : float
         Marker noise SD the fit estimated (or was given), metres per coordinate.
     method : str
