@@ -160,7 +160,7 @@ def build_parser() -> argparse.ArgumentParser:
     jn.add_argument("recording", help="recording bundle directory or recording.toml")
     jn.add_argument("--out", required=True, help="output directory")
     jn.add_argument("--method", default="auto", choices=["auto", "ml", "halvorsen", "gamage_lasenby", "sara"],
-                    help="axis fit (default auto: maximum likelihood when the parent is still, SARA when it moves)")
+                    help="axis fit (default auto: maximum likelihood, or SARA where the markers do not move as a hinge)")
     jn.add_argument("--json", action="store_true", help="print a JSON summary on stdout")
     jn.set_defaults(func=_cmd_joints)
 

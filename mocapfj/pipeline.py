@@ -285,6 +285,24 @@ def calibrate_joint(v: np.ndarray, labels, t: np.ndarray, method: str = "ml"):
     return geometry, calibrate_joint_angles(v, geometry, t)
 
 
+HINGE_MISFIT_RATIO = 5.0
+"""`auto` fits by SARA when the ML hinge's marker residual exceeds this many times the link
+cluster's own rigid-fit residual: the markers then do not move as a hinge (skin, a forearm that
+also pronates), and the cluster's rotations locate the axis better than its marker positions."""
+
+
+def auto_calibrate_joint(v: np.ndarray, labels, t):
+    """Maximum likelihood, or SARA where the markers do not move as a hinge (`HINGE_MISFIT_RATIO`)."""
+    from .joints import cluster_template, kabsch
+
+    geometry, angles = calibrate_joint(v, labels, t, "ml")
+    _, _, rigid = kabsch(cluster_template(v), v)
+    rigid_rms = float(np.nanmedian(rigid))
+    if geometry.marker_rms > HINGE_MISFIT_RATIO * max(rigid_rms, 1e-6):
+        return calibrate_joint(v, labels, t, "sara")
+    return geometry, angles
+
+
 def calibrate_joint_angles(v, geometry, t):
     """Angles of a joint with a given geometry (as `calibrate_joint` solves them for its method)."""
     from .joints.angles import joint_angles
@@ -305,9 +323,9 @@ def run_joints(recording: str | Path, out: str | Path, method: str = "auto") -> 
 
     Writes OUT/<joint>.joint.toml (the cluster calibration), OUT/<joint>.angles.csv (per mocap
     sample: times, q, sigma_q, q_m, delta, sigma_delta, tau, markers used, marker RMS) and
-    OUT/joints.json (the summary printed by --json). `method` "auto" fits a joint whose parent is
-    the world or does not move by maximum likelihood, and one whose parent moves by SARA
-    (`fit_sara_geometry`); or name one method for every joint.
+    OUT/joints.json (the summary printed by --json). `method` "auto" fits each joint by maximum
+    likelihood, or by SARA where its markers do not move as a hinge (`auto_calibrate_joint`); or
+    name one method for every joint.
     """
     from .io import write_csv_columns
     from .io.geometry import write_joint_geometry
@@ -319,8 +337,11 @@ def run_joints(recording: str | Path, out: str | Path, method: str = "auto") -> 
     joints = []
     for i, spec in enumerate(rec.joints):
         v, parent_template, static_parent = joint_frame_markers(rec, spec)
-        how = method if method != "auto" else ("ml" if static_parent else "sara")
-        geometry, angles = calibrate_joint(v, spec.link_markers, rec.markers.t, how)
+        try:
+            geometry, angles = (auto_calibrate_joint(v, spec.link_markers, rec.markers.t) if method == "auto"
+                                else calibrate_joint(v, spec.link_markers, rec.markers.t, method))
+        except InputError as e:
+            raise InputError(rec.root, f"joints[{spec.name}] ({e.field})", e.expected, e.got, e.hint) from None
         d = deflection(angles, rec.controller, i, rec.clock_offset_s)
         ok = np.isfinite(d.delta)
         if ok.sum() > 2 and np.corrcoef(angles.q[ok], d.q_m[ok])[0, 1] < 0:

@@ -54,7 +54,7 @@ def test_geometry_and_reported_numbers(pa10_joint2):
     assert max(j["radius_rms_mm"]) <= 0.3  # seed 000 reports <= 0.3 mm
     assert 0.2 < j["marker_rms_mm"] < 1.1  # seed 000 reports 0.5-1.1 mm on a real PA-10
     assert j["angle_sigma_rad"] == pytest.approx(truth["angle_sigma_rad"], rel=0.02)
-    assert j["n_frames"] == 5001 and j["n_frames_invalid"] <= 5 and j["parent_static"] is True
+    assert j["n_frames"] == 5001 and j["n_frames_invalid"] <= 5 and j["parent_static"] is True and j["method"] == "ml"
     assert 30 < j["q_range_deg"] < 50
     # the axis sign follows the motor: link angle and motor angle increase together
     a = read_csv_columns(root / "out" / "j2.angles.csv")
@@ -126,3 +126,29 @@ def test_ml_is_refused_or_poor_where_the_hinge_does_not_hold(realdata):
     v, _, _ = markers_in_parent_frame(m.select(child), m.select(parent))
     g, _ = fit_hinge_ml(v, init=fit_halvorsen(v))
     assert g.marker_rms > 0.01
+
+
+def test_too_little_motion_is_one_clear_line(tmp_path, capsys):
+    import tomllib
+
+    import tomli_w
+
+    doc = tomllib.loads((DATASETS / "pa10_joint2.toml").read_text())
+    doc["joints"][0]["reference"]["amplitudes_rad"] = [0.02, 0.0, 0.0, 0.0, 0.0]  # about 1.4 deg of motion
+    (tmp_path / "still.toml").write_text(tomli_w.dumps(doc))
+    write_scenario_bundle(record_scenario(load_scenario(tmp_path / "still.toml").with_duration(4.0),
+                                          with_concealment=False), tmp_path / "still")
+    assert main(["joints", str(tmp_path / "still"), "--out", str(tmp_path / "out")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1
+    assert "still: joints[j2]" in err and "expected a range of motion of at least 5 deg" in err
+    assert "move the joint further during calibration" in err
+
+
+def test_auto_chooses_sara_only_where_the_markers_are_not_a_hinge(realdata):
+    from mocapfj.pipeline import auto_calibrate_joint
+
+    name, parent, child, _, _ = REAL[0]
+    m = read_c3d(realdata / "c3d_samples" / name)
+    v, _, _ = markers_in_parent_frame(m.select(child), m.select(parent))
+    assert auto_calibrate_joint(v, child, m.t)[0].method == "sara"
