@@ -152,3 +152,19 @@ def test_auto_chooses_sara_only_where_the_markers_are_not_a_hinge(realdata):
     m = read_c3d(realdata / "c3d_samples" / name)
     v, _, _ = markers_in_parent_frame(m.select(child), m.select(parent))
     assert auto_calibrate_joint(v, child, m.t)[0].method == "sara"
+
+
+def test_axis_in_the_world_is_within_its_reported_uncertainty(pa10_joint2):
+    """Joint 2's true axis is the world y axis (PA-10 modified D-H, joint 1 at zero)."""
+    from mocapfj.io import load_recording
+    from mocapfj.io.geometry import read_joint_geometry
+
+    _, _, root = pa10_joint2
+    rec = load_recording(root / "bundle")
+    _, g, parent = read_joint_geometry(root / "out" / "j2.joint.toml")
+    R, _, _ = kabsch(np.asarray(parent["template_m"]), np.nanmean(rec.markers.select(parent["labels"]), axis=0)[None])
+    axis_world = R[0] @ g.axis
+    err = np.arccos(min(1.0, abs(axis_world[1])))
+    sd = np.sqrt(np.trace(g.cov_axis))
+    assert err < 3 * sd, (np.degrees(err), np.degrees(sd))
+    assert np.degrees(sd) < 0.01
