@@ -7,8 +7,8 @@ from pathlib import Path
 import numpy as np
 
 from .errors import InputError
-from .io import load_recording, read_markers, write_json, write_recording
-from .types import MarkerTrajectories, Recording
+from .io import load_recording, read_markers, write_json
+from .types import JointAngles, JointGeometry, MarkerTrajectories, Recording
 
 __all__ = ["summarize_markers", "summarize_recording", "inspect_path", "run_simulate", "run_demo"]
 
@@ -188,7 +188,7 @@ def joint_frame_markers(rec: Recording, spec) -> tuple[np.ndarray, np.ndarray | 
     return markers_in_parent_frame(v, None if spec.parent_is_world else rec.markers.select(spec.parent_markers))
 
 
-def fit_sara_geometry(v: np.ndarray, labels) -> "JointGeometry":
+def fit_sara_geometry(v: np.ndarray, labels) -> JointGeometry:
     """A hinge from the motion of the link cluster as a rigid body in the parent frame (SARA).
 
     For joints between two moving segments, where the markers also move in ways a hinge does not
@@ -198,7 +198,6 @@ def fit_sara_geometry(v: np.ndarray, labels) -> "JointGeometry":
     parts of the trial.
     """
     from .joints import cluster_template, fit_sara, kabsch, predict_markers
-    from .types import JointGeometry
 
     tmpl = cluster_template(v)
     R, t, _ = kabsch(tmpl, v)
@@ -241,14 +240,13 @@ def _twist(R: np.ndarray, axis: np.ndarray) -> np.ndarray:
     return q
 
 
-def sara_angles(v: np.ndarray, geometry, t) -> "JointAngles":
+def sara_angles(v: np.ndarray, geometry, t) -> JointAngles:
     """Angles of a SARA joint: the twist about its axis of the link cluster's rigid rotation.
 
     The cluster (its template in the parent frame) is fitted to each frame (Kabsch); frames with
     fewer than 3 markers are NaN. sigma_q is sigma_m / sqrt(sum of r_p^2 over the markers seen).
     """
     from .joints import kabsch, predict_markers
-    from .types import JointAngles
 
     R, _, _ = kabsch(geometry.point + geometry.template, v)
     q = _twist(R, geometry.axis)

@@ -94,13 +94,12 @@ def simulate_scenario(scn: Scenario, with_effects: bool = True) -> dict[str, Sim
                 break
         else:
             raise ValueError(f"scenario {scn.name}: coupling effects form a cycle")
-        tau_ext = None
-        if couplings:
-            srcs = [(float(e.params["inertia_kgm2"]), out[e.params["source"]]) for e in couplings]
+        srcs = [(float(e.params["inertia_kgm2"]), out[e.params["source"]]) for e in couplings]
 
-            def tau_ext(tt, srcs=srcs):
-                return -sum(c * np.interp(tt, r.t, r.qdd[:, 0]) for c, r in srcs)
-        out[j.name] = simulate(models[j.name], t, _pid(scn, [j]), tau_ext=tau_ext, **opts)
+        def coupling_torque(tt, srcs=srcs):
+            return -sum(c * np.interp(tt, r.t, r.qdd[:, 0]) for c, r in srcs)
+
+        out[j.name] = simulate(models[j.name], t, _pid(scn, [j]), tau_ext=coupling_torque if srcs else None, **opts)
         pending.remove(j)
     return out
 
