@@ -28,6 +28,7 @@ __all__ = [
     "JointGeometry",
     "JointAngles",
     "Deflection",
+    "LSResult",
     "WORLD",
 ]
 
@@ -512,3 +513,47 @@ class Deflection:
     tau: np.ndarray
     q_offset_rad: float
     q_m_quantum_rad: float
+
+
+@dataclass(frozen=True, eq=False)
+class LSResult:
+    """A least-squares identification with its statistics (seed 003 eq. 15-17).
+
+    Attributes
+    ----------
+    names : tuple of p str
+    values : (p,) float
+        Estimates, SI units of each parameter.
+    std : (p,) float
+        Standard deviations, sqrt(diag(cov)).
+    rel_std_pct : (p,) float
+        100 std / |value| (NaN where the value is 0).
+    cov : (p, p) float
+        sigma_rho^2 (W^T W)^-1 with sigma_rho^2 = ||y - W x||^2 / (r - p).
+    cond : float
+        Condition number of the (weighted) observation matrix, columns unscaled.
+    residual_rms : float
+        RMS of y - W x, units of y.
+    rel_error_pct : float
+        100 ||y - W x|| / ||y||.
+    r2 : float
+        1 - ||y - W x||^2 / ||y - mean(y)||^2.
+    n_samples : int
+    unidentifiable : tuple of str
+        Parameters the data cannot separate (rank deficiency); their values are NaN.
+    """
+
+    names: tuple[str, ...]
+    values: np.ndarray
+    std: np.ndarray
+    rel_std_pct: np.ndarray
+    cov: np.ndarray
+    cond: float
+    residual_rms: float
+    rel_error_pct: float
+    r2: float
+    n_samples: int
+    unidentifiable: tuple[str, ...] = ()
+
+    def __getitem__(self, name: str) -> float:
+        return float(self.values[self.names.index(name)])
