@@ -13,13 +13,17 @@ def test_reported_std_matches_the_monte_carlo_scatter():
     rng = np.random.default_rng(1)
     W = np.column_stack([rng.normal(size=400), np.sin(np.linspace(0, 20, 400)), np.ones(400)])
     x = np.array([2.0, -0.5, 10.0])
-    fits = [ls_fit(W, W @ x + rng.normal(0, 0.3, 400), ["a", "b", "c"]) for _ in range(2000)]
+    ys = [W @ x + rng.normal(0, 0.3, 400) for _ in range(2000)]
+    fits = [ls_fit(W, y, ["a", "b", "c"]) for y in ys]
     values = np.array([f.values for f in fits])
     np.testing.assert_allclose(values.mean(0), x, atol=4 * 0.3 / np.sqrt(400 * 2000) * 10)
     np.testing.assert_allclose(values.std(0, ddof=1), np.mean([f.std for f in fits], 0), rtol=0.05)
     f = fits[0]
     np.testing.assert_allclose(f.rel_std_pct, 100 * f.std / np.abs(f.values))
-    assert f.cond == pytest.approx(np.linalg.cond(W)) and 0.99 < f.r2 < 1
+    res = ys[0] - W @ f.values
+    assert f.cond == pytest.approx(np.linalg.cond(W))
+    assert f.r2 == pytest.approx(1 - res @ res / np.sum((ys[0] - ys[0].mean()) ** 2), rel=1e-12)
+    assert f.residual_rms == pytest.approx(np.sqrt(np.mean(res**2)), rel=1e-12)
     assert f["c"] == f.values[2]
     cv = cv_pct(fits[:10])
     assert cv.shape == (3,) and (cv > 0).all()
