@@ -92,10 +92,24 @@ def run_demo(out: str | Path, duration_s: float | None = None) -> dict:
 
     Simulates the shipped pa10_joint2 scenario (seed 000 Table I, joint 2) into ``OUT/pa10_joint2``
     (bundle, truth.json, truth.csv), loads it back through the readers a lab's recording goes
-    through, and writes ``OUT/summary.json``.
+    through, calibrates the joint and solves its angles and deflections (``OUT/joints``), compares
+    the deflection with the truth, and writes ``OUT/summary.json``.
     """
+    from .io import read_csv_columns
+
     out = Path(out)
     summary = run_simulate(default_scenario(), out / "pa10_joint2", duration_s=duration_s, concealment=False)
+    joints = run_joints(out / "pa10_joint2", out / "joints")
+    truth = read_csv_columns(out / "pa10_joint2" / "truth.csv")
+    for j in joints["joints"]:
+        a = read_csv_columns(out / "joints" / f"{j['name']}.angles.csv")
+        true_delta = np.interp(a["t_controller"], truth["time"], truth[f"delta_{j['name']}"])
+        err = a["delta"] - true_delta
+        ok = np.isfinite(err)
+        err = err[ok] - err[ok].mean()
+        j["deflection_error_rms_rad"] = float(np.sqrt(np.mean(err**2)))
+        j["deflection_error_bound_rad"] = float(np.sqrt(np.mean(a["sigma_delta"][ok] ** 2)))
+    summary["joints_fit"] = joints["joints"]
     write_json(out / "summary.json", summary)
     return summary
 
