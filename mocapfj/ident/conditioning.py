@@ -41,6 +41,11 @@ def lowpass(x: np.ndarray, fs_hz: float, cutoff_hz: float, order: int = 4) -> np
 def derivatives(x: np.ndarray, fs_hz: float) -> tuple[np.ndarray, np.ndarray]:
     """First and second derivatives by central differences (second order inside, one-sided at
     the ends) along axis 0, for a uniformly sampled signal: (x', x'')."""
+    if not (np.isfinite(fs_hz) and fs_hz > 0):
+        raise InputError(None, "fs_hz", "a positive sampling rate in Hz", fs_hz)
+    x = np.asarray(x, dtype=np.float64)
+    if x.ndim == 0 or x.shape[0] < 3:
+        raise InputError(None, "x", "at least 3 samples for a second derivative", x.shape[:1])
     dt = 1.0 / fs_hz
     d1 = np.gradient(x, dt, axis=0)
     return d1, np.gradient(d1, dt, axis=0)
@@ -55,6 +60,8 @@ def decimate_parallel(W: np.ndarray, y: np.ndarray, factor: int, fs_hz: float | 
     if int(factor) != factor or factor < 1:
         raise InputError(None, "factor", "a positive whole decimation factor", factor)
     factor = int(factor)
+    if np.shape(W)[0] != np.shape(y)[0]:
+        raise InputError(None, "W, y", "as many rows in W as samples in y", f"{np.shape(W)}, {np.shape(y)}")
     if factor == 1:
         return np.asarray(W, float), np.asarray(y, float)
     fs = 1.0 if fs_hz is None else fs_hz
