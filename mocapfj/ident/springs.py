@@ -1,0 +1,291 @@
+"""Step 2 spring models: fit tau_s = f(delta, history) to the (delta, tau_s) pairs of the two-step
+method (seed 000 eq. 7: "a suitable stiffness model can be selected by examining the relationship
+between joint deflection and stiffness torque") and choose one by held-out error.
+
+Models (signs and units: docs/conventions.md; elements: :mod:`mocapfj.dynamics`):
+
+- ``linear``:    tau_s = k delta + tau0                                  (LS, seed 000 eq. 7)
+- ``cubic``:     tau_s = k1 delta + k3 delta^3 + tau0                     (LS)
+- ``piecewise``: tau_s = PiecewiseSpring(k1, k2, k3, tau1, tau2)(delta - d0)  (nonlinear LS)
+- ``backlash``:  tau_s = Backlash(gap, LinearSpring(k))(delta - d0)           (nonlinear LS)
+- ``bouc_wen``:  tau_s = BoucWen(k, alpha, beta, gamma)(delta - d0) along the path (output error)
+
+The offsets: tau0 (a torque offset) for the models linear in their parameters, d0 (a deflection
+offset: the mocap zero, see mocapfj.ident.twostep) for the nonlinear ones.
+
+Bouc-Wen is fitted by output error: its state is integrated along the measured delta(t) for each
+trial parameter set. For n = 1 and a deflection linear between samples, dz/d(delta) =
+A - (beta s + gamma sgn z) z (s the sign of the step) is linear in z on each piece, so the path is
+integrated exactly piece by piece (:func:`bouc_wen_states`); the test checks it against
+``BoucWen.run``. Fits are seeded deterministically (no random starts).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Callable
+
+import numpy as np
+from scipy.optimize import least_squares
+
+from ..dynamics import Backlash, BoucWen, CubicSpring, LinearSpring, PiecewiseSpring
+from ..errors import InputError
+from .ls import ls_fit
+
+__all__ = ["SpringFit", "SpringSelection", "fit_linear", "fit_cubic", "fit_piecewise", "fit_backlash",
+           "fit_bouc_wen", "bouc_wen_states", "select_spring_model", "SPRING_FITTERS"]
+
+
+@dataclass(frozen=True, eq=False)
+class SpringFit:
+    """A fitted spring model.
+
+    Attributes
+    ----------
+    model : str
+        "linear", "cubic", "piecewise", "backlash" or "bouc_wen".
+    params : dict of str to float
+        Coefficients (N m / rad, N m / rad^3, N m, rad, rad^-1), with the offset "tau0" or "d0".
+    element : object
+        The mocapfj.dynamics element with these coefficients (the offset is not part of it).
+    n_params : int
+        Number of fitted parameters (for AIC/BIC).
+    rss : float
+        Residual sum of squares on the fitted samples, N^2 m^2.
+    r2 : float
+        1 - rss / sum((tau_s - mean)^2) on the fitted samples.
+    """
+
+    model: str
+    params: dict
+    element: object
+    n_params: int
+    rss: float
+    r2: float
+    predictor: Callable = field(repr=False)
+
+    def predict(self, delta, t) -> np.ndarray:
+        """tau_s (T,) N m along delta (T,) rad at t (T,) s (a hysteretic model starts virgin at t[0])."""
+        return self.predictor(np.asarray(delta, dtype=np.float64), np.asarray(t, dtype=np.float64))
+
+
+@dataclass(frozen=True, eq=False)
+class SpringSelection:
+    """Model selection by held-out error (:func:`select_spring_model`).
+
+    chosen : SpringFit (fitted on the training part)
+    fits : dict model -> SpringFit
+    holdout_rms : dict model -> RMS error on the held-out part, N m
+    criterion : dict model -> information criterion on the held-out part (lower is better)
+    r2 : float
+        r2 of the chosen model on the held-out part.
+    """
+
+    chosen: SpringFit
+    fits: dict
+    holdout_rms: dict
+    criterion: dict
+    r2: float
+
+
+def _check(delta, tau_s, t=None):
+    d = np.asarray(delta, dtype=np.float64)
+    y = np.asarray(tau_s, dtype=np.float64)
+    if d.ndim != 1 or y.shape != d.shape or d.size < 10:
+        raise InputError(None, "delta, tau_s", "two (T,) arrays with T >= 10", f"{d.shape}, {y.shape}")
+    if not (np.isfinite(d).all() and np.isfinite(y).all()):
+        raise InputError(None, "delta, tau_s", "finite samples in time order (cut NaN first)")
+    if t is not None:
+        tt = np.asarray(t, dtype=np.float64)
+        if tt.shape != d.shape or not (np.diff(tt) > 0).all():
+            raise InputError(None, "t", "(T,) strictly increasing times, s", tt.shape)
+        return d, y, tt
+    return d, y
+
+
+def _finish(model, params, element, n, pred, d, y, t):
+    r = y - pred(d, t)
+    rss = float(r @ r)
+    dev = y - y.mean()
+    return SpringFit(model=model, params=params, element=element, n_params=n, rss=rss,
+                     r2=1.0 - rss / float(dev @ dev), predictor=pred)
+
+
+def fit_linear(delta, tau_s, t=None) -> SpringFit:
+    """tau_s = k delta + tau0 by least squares (seed 000 eq. 7). delta (T,) rad, tau_s (T,) N m."""
+    d, y = _check(delta, tau_s)[:2]
+    res = ls_fit(np.column_stack([d, np.ones_like(d)]), y, ("k", "tau0"))
+    k, tau0 = res.values
+
+    def pred(dd, tt):
+        return k * dd + tau0
+
+    return _finish("linear", {"k": k, "tau0": tau0}, LinearSpring(k=k, offset=-tau0 / k), 2, pred, d, y, t)
+
+
+def fit_cubic(delta, tau_s, t=None) -> SpringFit:
+    """tau_s = k1 delta + k3 delta^3 + tau0 by least squares. delta (T,) rad, tau_s (T,) N m."""
+    d, y = _check(delta, tau_s)[:2]
+    res = ls_fit(np.column_stack([d, d**3, np.ones_like(d)]), y, ("k1", "k3", "tau0"))
+    k1, k3, tau0 = res.values
+
+    def pred(dd, tt):
+        return k1 * dd + k3 * dd**3 + tau0
+
+    return _finish("cubic", {"k1": k1, "k3": k3, "tau0": tau0}, CubicSpring(k1=k1, k3=k3), 3, pred, d, y, t)
+
+
+def _nls(resid, x0s, lb, ub, scale, max_nfev=None):
+    best = None
+    for x0 in x0s:
+        x0 = np.clip(x0, lb + 1e-12 * scale, ub - 1e-12 * scale)
+        r = least_squares(resid, x0, bounds=(lb, ub), x_scale=scale, method="trf", max_nfev=max_nfev)
+        if best is None or r.cost < best.cost:
+            best = r
+    return best.x
+
+
+def fit_piecewise(delta, tau_s, t=None) -> SpringFit:
+    """Three-piece odd spring (PiecewiseSpring) of delta - d0, by nonlinear least squares.
+
+    Parameters k1, k2, k3 (N m / rad), tau1 < tau2 (N m), d0 (rad); a few deterministic starts
+    over the breakpoints (fractions of max |tau_s|).
+    """
+    d, y = _check(delta, tau_s)[:2]
+    k = fit_linear(d, y).params["k"]
+    tmax = float(np.max(np.abs(y)))
+
+    def spring(x):
+        return PiecewiseSpring(k1=x[0], k2=x[1], k3=x[2], tau1=x[3], tau2=x[3] + x[4])
+
+    def resid(x):
+        return spring(x).torque(d - x[5]) - y
+
+    lb = np.array([1e-3 * k] * 3 + [1e-3 * tmax, 1e-3 * tmax, -np.inf])
+    ub = np.array([1e3 * k] * 3 + [tmax, 2 * tmax, np.inf])
+    scale = np.array([k, k, k, tmax, tmax, max(np.std(d), 1e-6)])
+    starts = [np.array([k, k, k, f1 * tmax, (f2 - f1) * tmax, 0.0]) for f1, f2 in ((0.1, 0.4), (0.1, 0.6), (0.2, 0.5), (0.2, 0.8), (0.3, 0.7))]
+    x = _nls(resid, starts, lb, ub, scale)
+    el, d0 = spring(x), x[5]
+    params = {**el.params, "d0": d0}
+    return _finish("piecewise", params, el, 6, lambda dd, tt: el.torque(dd - d0), d, y, t)
+
+
+def fit_backlash(delta, tau_s, t=None) -> SpringFit:
+    """Dead zone of total width `gap` (rad) in front of a linear spring k, offset d0 (rad)."""
+    d, y = _check(delta, tau_s)[:2]
+    lin = fit_linear(d, y)
+    k = lin.params["k"]
+    span = float(np.ptp(d))
+
+    def resid(x):
+        return Backlash(x[0], LinearSpring(x[1])).torque(d - x[2]) - y
+
+    lb, ub = np.array([0.0, 1e-3 * k, -np.inf]), np.array([span, 1e3 * k, np.inf])
+    d00 = -lin.params["tau0"] / k
+    starts = [np.array([g * span, k, d00]) for g in (0.01, 0.1, 0.3)]
+    x = _nls(resid, starts, lb, ub, np.array([span, k, max(np.std(d), 1e-6)]))
+    el, d0 = Backlash(x[0], LinearSpring(x[1])), x[2]
+    return _finish("backlash", {"gap": x[0], "k": x[1], "d0": d0}, el, 3, lambda dd, tt: el.torque(dd - d0), d, y, t)
+
+
+def bouc_wen_states(delta, A: float, beta: float, gamma: float, z0: float = 0.0) -> np.ndarray:
+    """Bouc-Wen state z (T,) rad (n = 1) along delta (T,) rad, linear between samples, exactly.
+
+    On a step of sign s, dz/d(delta) = A - lam z with lam = beta s + gamma (z >= 0) or
+    beta s - gamma (z < 0); solved in closed form, switching law where z crosses 0.
+    """
+    D = np.diff(np.asarray(delta, dtype=np.float64)).tolist()
+    z = np.empty(len(D) + 1)
+    z[0] = zc = float(z0)
+    for i, dlt in enumerate(D):
+        s = 1.0 if dlt > 0 else -1.0
+        rem = dlt
+        for _ in range(2):                           # at most one sign change of z per step
+            lam = beta * s + (gamma if (zc > 0 or (zc == 0 and s > 0)) else -gamma)
+            if abs(lam) < 1e-12:
+                zn = zc + A * rem
+            else:
+                zi = A / lam
+                zn = zi + (zc - zi) * np.exp(-lam * rem)
+            if zc * zn < 0:                          # crossed 0: distance to it, then the other law
+                if abs(lam) < 1e-12:
+                    used = -zc / A
+                else:
+                    used = -np.log(zi / (zi - zc)) / lam
+                rem -= used
+                zc = 0.0
+                continue
+            zc = zn
+            break
+        z[i + 1] = zc
+    return z
+
+
+def fit_bouc_wen(delta, tau_s, t, *, max_samples: int = 2000, max_nfev: int = 60) -> SpringFit:
+    """Bouc-Wen hysteretic spring (A = 1, n = 1) of delta - d0 by output error.
+
+    Parameters k (N m / rad), alpha in [0, 1], beta (rad^-1), gamma (rad^-1, beta + gamma > 0),
+    d0 (rad). The series is strided to at most `max_samples` samples for the fit (the path is
+    taken as linear between the kept samples; keep delta smooth at that stride); each of the two
+    deterministic starts gets at most `max_nfev` evaluations (each one integration of the path).
+    """
+    d, y, tt = _check(delta, tau_s, t)
+    step = max(1, int(np.ceil(d.size / max_samples)))
+    ds, ys = d[::step], y[::step]
+    lin = fit_linear(d, y)
+    k = lin.params["k"]
+    span = float(np.ptp(d))
+
+    def model(x, dd):
+        z = bouc_wen_states(dd - x[4], 1.0, x[2], x[3])
+        return x[1] * x[0] * (dd - x[4]) + (1 - x[1]) * x[0] * z
+
+    def resid(x):
+        return model(x, ds) - ys
+
+    lb = np.array([1e-3 * k, 0.0, 1e-6 / span, -1e6 / span, -np.inf])
+    ub = np.array([1e3 * k, 1.0, 1e6 / span, 1e6 / span, np.inf])
+    d00 = -lin.params["tau0"] / k
+    starts = [np.array([k, a, 0.5 / (f * span), 0.5 / (f * span), d00]) for a, f in ((0.9, 0.05), (0.7, 0.2))]
+    x = _nls(resid, starts, lb, ub, np.array([k, 0.1, 10 / span, 10 / span, max(np.std(d), 1e-6)]), max_nfev)
+    el = BoucWen(k=x[0], alpha=x[1], beta=x[2], gamma=max(x[3], -x[2] + 1e-9))
+    params = {"k": x[0], "alpha": x[1], "beta": x[2], "gamma": x[3], "d0": x[4]}
+    return _finish("bouc_wen", params, el, 5, lambda dd, tt_: model(x, dd), d, y, tt)
+
+
+SPRING_FITTERS = {"linear": fit_linear, "cubic": fit_cubic, "piecewise": fit_piecewise,
+                  "backlash": fit_backlash, "bouc_wen": fit_bouc_wen}
+
+
+def select_spring_model(delta, tau_s, t, *, models=("linear", "cubic", "piecewise", "backlash", "bouc_wen"),
+                        holdout: float = 0.3, criterion: str = "bic") -> SpringSelection:
+    """Fit each model on the first 1 - `holdout` of the series and score it on the rest.
+
+    The score is an information criterion on the held-out samples, N ln(RSS/N) + p ln N (BIC) or
+    + 2 p (AIC); the lowest wins. A hysteretic model is run over the whole series (its state
+    carries over) and scored on the held-out part. delta (T,) rad, tau_s (T,) N m, t (T,) s in
+    time order.
+    """
+    d, y, tt = _check(delta, tau_s, t)
+    if not 0 < holdout < 1:
+        raise InputError(None, "holdout", "a fraction in (0, 1)", holdout)
+    if criterion not in ("aic", "bic"):
+        raise InputError(None, "criterion", '"aic" or "bic"', repr(criterion))
+    unknown = [m for m in models if m not in SPRING_FITTERS]
+    if unknown or not models:
+        raise InputError(None, "models", f"names from {sorted(SPRING_FITTERS)}", unknown)
+    n_tr = int(round(d.size * (1 - holdout)))
+    test = slice(n_tr, None)
+    n = d.size - n_tr
+    fits, rms, crit = {}, {}, {}
+    for m in models:
+        f = SPRING_FITTERS[m](d[:n_tr], y[:n_tr], tt[:n_tr])
+        r = (f.predict(d, tt) - y)[test]
+        rss = float(r @ r)
+        fits[m], rms[m] = f, float(np.sqrt(rss / n))
+        crit[m] = n * np.log(rss / n) + (f.n_params * np.log(n) if criterion == "bic" else 2 * f.n_params)
+    best = min(crit, key=crit.get)
+    dev = y[test] - y[test].mean()
+    return SpringSelection(chosen=fits[best], fits=fits, holdout_rms=rms, criterion=crit,
+                           r2=1.0 - rms[best] ** 2 * n / float(dev @ dev))

@@ -1,0 +1,118 @@
+"""Two-step identification (mocapfj.ident.twostep; seed 000 §II.A eq. 4-7, Table I joint 2)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from mocapfj import InputError
+from mocapfj.ident.twostep import controller_on, identify_joint
+from mocapfj.io import read_csv_columns
+
+ROOT = Path(__file__).resolve().parents[2]
+# seed 000 Table I, joint 2 means (the pa10_joint2 scenario's true parameters)
+TABLE1_J2 = dict(I=6.15, mglx=111.64, mgly=-7.80, c=9.28, v=18.38, J=12.57, b=23.28)
+K_J2 = 1.19e4
+
+
+@pytest.fixture(scope="module")
+def recorded():
+    from mocapfj.synth.record import record_scenario
+    from mocapfj.synth.scenario import load_scenario
+
+    return record_scenario(load_scenario(ROOT / "datasets" / "pa10_joint2.toml").with_duration(30.0),
+                           with_concealment=False)
+
+
+def _rel_err(result, ref):
+    return {n: 100.0 * (result[n] / v - 1.0) for n, v in ref.items()}
+
+
+def test_true_signals_recover_table1_joint2_and_two_step_is_better_conditioned(recorded):
+    r = recorded.sim["j2"]
+    res = identify_joint(r.t, r.q[:, 0], r.q_m[:, 0], r.u[:, 0], fs_hz=1000.0)
+    err = _rel_err(res.step1, TABLE1_J2)
+    print("step 1 error %:", {k: round(v, 3) for k, v in err.items()}, "k:", res.spring["k"],
+          "cond two/one:", res.cond_two_step, res.cond_one_step)
+    for name, e in err.items():
+        assert abs(e) < 2.0, (name, e)
+    assert res.spring["k"] == pytest.approx(K_J2, rel=0.02)
+    assert res.one_step["k"] == pytest.approx(K_J2, rel=0.02)
+    assert res.cond_two_step < res.cond_one_step
+    assert abs(res.q_zero_rad) < 1e-4          # the true q has the true zero
+    # the reconstructed spring torque is the simulator's (eq. 7)
+    tau_true = np.interp(res.t, r.t, r.tau_s[:, 0])
+    assert np.sqrt(np.mean((res.tau_s - tau_true) ** 2)) < 0.01 * np.ptp(tau_true)
+    assert res.spring.r2 > 0.999
+
+
+@pytest.fixture(scope="module")
+def chain(recorded, tmp_path_factory):
+    from mocapfj.pipeline import run_joints
+    from mocapfj.synth.record import write_scenario_bundle
+
+    d = tmp_path_factory.mktemp("twostep")
+    write_scenario_bundle(recorded, d / "bundle")
+    run_joints(d / "bundle", d / "out")
+    a = read_csv_columns(d / "out" / "j2.angles.csv")
+    log = recorded.recording.controller
+    t, q = a["t_controller"], a["q"]
+    ok = np.isfinite(q)
+    q = np.interp(t, t[ok], q[ok])                                  # fill the (rare) occluded frames
+    q_m = controller_on(t, log.t, log.q_m[:, 0], 1000.0, 100.0)     # 1 kHz log onto the 250 Hz mocap clock
+    u = controller_on(t, log.t, log.tau[:, 0], 1000.0, 100.0)
+    g = np.isfinite(q_m) & np.isfinite(u)
+    res = identify_joint(t[g], q[g], q_m[g], u[g], fs_hz=250.0, cutoff_hz=10.0, decimate=2)
+    err = _rel_err(res.step1, TABLE1_J2)
+    err["k (two-step)"] = 100.0 * (res.spring["k"] / K_J2 - 1.0)
+    err["k (one-step)"] = 100.0 * (res.one_step["k"] / K_J2 - 1.0)
+    err["I+J"] = 100.0 * ((res.step1["I"] + res.step1["J"]) / (TABLE1_J2["I"] + TABLE1_J2["J"]) - 1.0)
+    err["v+b"] = 100.0 * ((res.step1["v"] + res.step1["b"]) / (TABLE1_J2["v"] + TABLE1_J2["b"]) - 1.0)
+    print("full chain, error %:", {k: round(v, 2) for k, v in err.items()},
+          "rel std %:", dict(zip(res.step1.names, np.round(res.step1.rel_std_pct, 2))), "n missing q:", int((~ok).sum()))
+    return res, err
+
+
+def test_full_chain_identifies_gravity_coulomb_sums_and_one_step_k(chain):
+    """Mocap q (0.43 mrad at 250 Hz) through the pipeline: what the data determine well."""
+    res, err = chain
+    for name in ("mglx", "mgly", "c", "I+J", "v+b", "k (one-step)"):
+        assert abs(err[name]) < 2.0, (name, err[name])
+    assert res.cond_two_step < res.cond_one_step
+    # the pipeline zeroes the mean deflection; step 2 finds that zero (true mean deflection ~ -1.4 mrad)
+    assert -3e-3 < res.q_zero_rad < -0.5e-3
+
+
+@pytest.mark.xfail(strict=True, reason=(
+    "measured: with mocap q the link/motor split is not resolved on this 30 s trajectory: I -88 %, J +42 %, "
+    "v -81 %, b +65 %, two-step k -8 % (ls_fit rel std of I 5 %, of v 51 %: it rests on delta'' and delta', "
+    "buried in the 0.43 mrad angle noise, and the q'' noise biases I towards 0). Seed 000's 2 % is not met."))
+def test_full_chain_meets_2_percent_for_every_parameter(chain):
+    _, err = chain
+    for name in (*TABLE1_J2, "k (two-step)"):
+        assert abs(err[name]) < 2.0, (name, err[name])
+
+
+def test_rigid_joint_does_not_excite_the_link_motor_split():
+    """q_m == q: the columns q'' and q_m'' (q' and q_m') coincide, so I/J and v/b are not separable."""
+    t = np.arange(20000) / 1000.0
+    q = 0.3 * np.sin(2 * np.pi * 0.2 * t) + 0.1 * np.sin(2 * np.pi * 0.7 * t + 1.0)
+    qd, qdd = np.gradient(q, t), np.gradient(np.gradient(q, t), t)
+    u = 18.72 * qdd - 111.64 * np.sin(q) - 7.8 * np.cos(q) + 9.28 * np.tanh(qd / 1e-3) + 41.66 * qd
+    with pytest.raises(InputError, match=r"no independent excitation of \['(I|J)', '(v|b)'\]|'(v|b)', '(I|J)'"):
+        identify_joint(t, q, q.copy(), u, fs_hz=1000.0)
+
+
+def test_bad_input_is_refused():
+    t = np.arange(1000) / 1000.0
+    q = np.sin(t)
+    with pytest.raises(InputError, match="uniform"):
+        identify_joint(t, q, q, q, fs_hz=250.0)
+    qn = q.copy()
+    qn[5] = np.nan
+    with pytest.raises(InputError, match="q: expected finite"):
+        identify_joint(t, qn, q, q, fs_hz=1000.0)
+    with pytest.raises(InputError, match="four"):
+        identify_joint(t, q[:-1], q, q, fs_hz=1000.0)
