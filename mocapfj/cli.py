@@ -21,7 +21,6 @@ PLANNED = [
     ("calibrate-camera", "calibrate camera intrinsics from board views"),
     ("calibrate-rig", "calibrate a multi-camera rig (board or wand)"),
     ("triangulate", "2D detections to labelled 3D marker trajectories"),
-    ("identify", "two-step identification of joint dynamics"),
     ("frf", "multisine frequency response estimation"),
     ("discover", "locate, name and model what the simulation misses"),
     ("run", "the whole chain on a recording"),
@@ -128,6 +127,26 @@ def _cmd_joints(args) -> int:
     return 0
 
 
+def _cmd_identify(args) -> int:
+    from .pipeline import run_identify
+
+    s = run_identify(args.recordings, args.out, cutoff_hz=args.cutoff, decimate=args.decimate)
+
+    def human(s):
+        lines = [f"identified {len(s['recordings'])} recording(s)"]
+        for j in s["joints"]:
+            p = j["params"]
+            lines.append(f"  joint {j['name']} ({j['n_trials']} trial(s)): " + ", ".join(
+                f"{n} {p[n]['value']:.4g}" for n in ("I", "mglx", "mgly", "c", "v", "J", "b", "k")))
+            lines.append(f"    cond two-step {j['cond_two_step']:.0f} vs one-step {j['cond_one_step']:.0f}, torque RMS "
+                         f"{j['torque_rms']:.3g} N m, one-step k {j['k_one_step']:.4g}, spring {j['spring']['model']}")
+        lines.append(f"  wrote {args.out}/identify.json, table.md, table.csv")
+        return "\n".join(lines)
+
+    _emit(args, s, human)
+    return 0
+
+
 def _cmd_inspect(args) -> int:
     from .pipeline import inspect_path
 
@@ -176,6 +195,14 @@ def build_parser() -> argparse.ArgumentParser:
                     help="axis fit (default auto: maximum likelihood, or SARA where the markers do not move as a hinge)")
     jn.add_argument("--json", action="store_true", help="print a JSON summary on stdout")
     jn.set_defaults(func=_cmd_joints)
+
+    idf = sub.add_parser("identify", help="two-step identification of joint dynamics (seed 000)")
+    idf.add_argument("recordings", nargs="+", help="recording bundles; repeats of the same joints give CV %%")
+    idf.add_argument("--out", required=True, help="output directory")
+    idf.add_argument("--cutoff", type=float, default=10.0, help="low-pass on the angles before differentiation, Hz")
+    idf.add_argument("--decimate", type=int, default=2, help="parallel decimation factor")
+    idf.add_argument("--json", action="store_true", help="print a JSON summary on stdout")
+    idf.set_defaults(func=_cmd_identify)
 
     i = sub.add_parser("inspect", help="check and summarise a recording bundle or a C3D/TRC file")
     i.add_argument("recording", help="bundle directory, recording.toml, or marker file")

@@ -390,3 +390,125 @@ def run_joints(recording: str | Path, out: str | Path, method: str = "auto") -> 
     summary = {"recording": rec.name, "method": method, "joints": joints}
     write_json(out / "joints.json", summary)
     return summary
+
+
+STEP1 = ("I", "mglx", "mgly", "c", "v", "J", "b")
+
+
+def identify_recording(recording: str | Path, out: str | Path, cutoff_hz: float = 10.0, decimate: int = 2) -> list[dict]:
+    """Two-step identification (seed 000 §II.A) of every joint of one recording.
+
+    Runs `run_joints` into OUT/joints, puts the link angle and the controller log on the mocap
+    samples (controller clock), identifies step 1 (I, mglx, mgly, c, v, J, b), reconstructs the
+    spring torque and selects a spring model by held-out error; the one-step formulation (eq. 4)
+    is solved as the baseline. Returns one dict per joint.
+    """
+    from .io import read_csv_columns
+    from .ident.springs import select_spring_model
+    from .ident.twostep import controller_on, identify_joint
+
+    out = Path(out)
+    rec = load_recording(recording)
+    run_joints(recording, out / "joints")
+    log = rec.controller
+    results = []
+    for i, spec in enumerate(rec.joints):
+        a = read_csv_columns(out / "joints" / f"{spec.name}.angles.csv")
+        t, q = a["t_controller"], a["q"]
+        ok = np.isfinite(q)
+        if ok.mean() < 0.95:
+            raise InputError(rec.root, f"joints[{spec.name}] link angle", "a link angle in at least 95 % of the frames",
+                             f"{100 * ok.mean():.1f} %", hint="check the markers' visibility")
+        q = np.interp(t, t[ok], q[ok])  # short gaps only (counted in the angles file)
+        q_m = controller_on(t, log.t, log.q_m[:, i], log.rate_hz, min(100.0, 0.45 * log.rate_hz))
+        u = controller_on(t, log.t, log.tau[:, i], log.rate_hz, min(100.0, 0.45 * log.rate_hz))
+        g = np.isfinite(q_m) & np.isfinite(u)
+        try:
+            res = identify_joint(t[g], q[g], q_m[g], u[g], fs_hz=rec.markers.rate_hz, cutoff_hz=cutoff_hz,
+                                 decimate=decimate)
+            spring = select_spring_model(res.delta, res.tau_s, res.t)
+        except InputError as e:
+            raise InputError(rec.root, f"joints[{spec.name}] ({e.field})", e.expected, e.got, e.hint) from None
+        results.append({
+            "name": spec.name,
+            "recording": rec.name,
+            "step1": res.step1,
+            "k": res.spring,
+            "one_step": res.one_step,
+            "cond_two_step": res.cond_two_step,
+            "cond_one_step": res.cond_one_step,
+            "torque_rms": res.torque_rms,
+            "spring": {"model": spring.chosen.model, "params": spring.chosen.params, "r2": spring.r2,
+                       "holdout_rms_Nm": spring.holdout_rms},
+            "frames_filled": int((~ok).sum()),
+        })
+    return results
+
+
+def _param_table(trials: list[dict]) -> tuple[dict, dict | None]:
+    """Per parameter {value, std, rel_std_pct}: one trial's LS statistics, or the mean and SD over trials."""
+    names = list(STEP1) + ["k"]
+    vals = np.array([[t["step1"][n] for n in STEP1] + [t["k"]["k"]] for t in trials])
+    if len(trials) == 1:
+        r1, rk = trials[0]["step1"], trials[0]["k"]
+        std = np.concatenate([r1.std, [rk.std[rk.names.index("k")]]])
+        cv = None
+    else:
+        std = vals.std(axis=0, ddof=1)
+        cv = {n: float(100 * s / abs(m)) if m else None for n, m, s in zip(names, vals.mean(0), std)}
+    mean = vals.mean(axis=0)
+    params = {n: {"value": float(m), "std": float(s), "rel_std_pct": float(100 * s / abs(m)) if m else None}
+              for n, m, s in zip(names, mean, std)}
+    return params, cv
+
+
+def run_identify(recordings, out: str | Path, cutoff_hz: float = 10.0, decimate: int = 2) -> dict:
+    """``mocapfj identify``: identify every joint of one or more recordings; repeats give CV %.
+
+    Writes OUT/<recording>/ (joints output), OUT/identify.json, and a seed-000-Table-I-style table
+    OUT/table.md and OUT/table.csv (per joint: mean and, with repeats, CV % of I, c, v, mglx,
+    mgly, b, J, k and the torque RMS error).
+    """
+    from .io.atomic import write_text_atomic
+
+    out = Path(out)
+    per_joint: dict[str, list[dict]] = {}
+    for k, r in enumerate(recordings):
+        for res in identify_recording(r, out / f"{k:02d}_{Path(r).name}", cutoff_hz, decimate):
+            per_joint.setdefault(res["name"], []).append(res)
+    joints = []
+    for name, trials in per_joint.items():
+        params, cv = _param_table(trials)
+        j = {
+            "name": name,
+            "params": params,
+            "cond_two_step": float(np.mean([t["cond_two_step"] for t in trials])),
+            "cond_one_step": float(np.mean([t["cond_one_step"] for t in trials])),
+            "torque_rms": float(np.mean([t["torque_rms"] for t in trials])),
+            "k_one_step": float(np.mean([t["one_step"]["k"] for t in trials])),
+            "spring": trials[0]["spring"],
+            "n_trials": len(trials),
+        }
+        if cv is not None:
+            j["cv_pct"] = cv
+        joints.append(j)
+    summary = {"recordings": [str(r) for r in recordings], "joints": joints}
+    write_json(out / "identify.json", summary)
+    # Table I of seed 000: columns I, c, v, mglx, mgly, b, J, k, error
+    cols = ["I", "c", "v", "mglx", "mgly", "b", "J", "k"]
+    units = ["kg m2", "N m", "N m s", "N m", "N m", "N m s", "kg m2", "N m/rad"]
+    lines = ["| joint | statistic | " + " | ".join(f"{c} ({u})" for c, u in zip(cols, units)) + " | error (N m) |",
+             "|" + "---|" * (len(cols) + 3)]
+    csv_lines = ["joint,statistic," + ",".join(cols) + ",error"]
+    for j in joints:
+        rows = [("mean", [j["params"][c]["value"] for c in cols], j["torque_rms"])]
+        rows.append(("CV (%)", [j["cv_pct"][c] for c in cols], None) if "cv_pct" in j
+                    else ("rel. std (%)", [j["params"][c]["rel_std_pct"] for c in cols], None))
+        for stat, vals, err in rows:
+            lines.append(f"| {j['name']} | {stat} | " + " | ".join("-" if v is None else f"{v:.4g}" for v in vals)
+                         + f" | {'' if err is None else f'{err:.3g}'} |")
+            csv_lines.append(",".join([j["name"], stat] + ["nan" if v is None else repr(float(v)) for v in vals]
+                                      + ["" if err is None else repr(float(err))]))
+    write_text_atomic(out / "table.md", "\n".join(lines) + "\n")
+    write_text_atomic(out / "table.csv", "\n".join(csv_lines) + "\n")
+    return summary
