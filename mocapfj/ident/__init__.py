@@ -6,11 +6,14 @@
 - :mod:`.regressor`: n-link joint torque regressor (Pinocchio) and base parameters.
 - :mod:`.twostep`: seed 000 two-step method and the one-step baseline.
 - :mod:`.springs`: spring and hysteresis models fitted to (deflection, spring torque), selection.
+- :mod:`.excitation`: Fourier motor references (seed 000 eq. 9) minimising the regressor's condition number (eq. 8).
 
 See docs/architecture.md for what this package owns and may import.
 """
 
 from .conditioning import decimate_parallel, derivatives, lowpass, resample_to
+from .excitation import (ExcitationDesign, design_excitation, reference_condition, reference_motion,
+                         simulated_condition, write_reference)
 from .idim import IDIM_MODELS, idim_cross_validation, idim_ls, idim_observation, idim_regressor, load_emps_mat
 from .ls import cv_pct, ls_fit, unidentifiable_columns
 from .regressor import base_from_standard, base_parameters, load_pin_model, nlink_regressor, standard_parameters
@@ -26,4 +29,6 @@ __all__ = [
     "identify_joint", "TwoStepResult", "controller_on", "step1_regressor", "one_step_regressor",
     "select_spring_model", "SpringFit", "SpringSelection", "fit_linear", "fit_cubic", "fit_piecewise",
     "fit_backlash", "fit_bouc_wen", "bouc_wen_states",
+    "ExcitationDesign", "design_excitation", "reference_condition", "reference_motion", "simulated_condition",
+    "write_reference",
 ]
