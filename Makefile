@@ -22,8 +22,9 @@ $(VENV)/.installed-test: pyproject.toml | $(BIN)/python
 demo: $(VENV)/.installed
 	$(BIN)/mocapfj demo --out demo_out
 
+# Tests run on every core (pytest-xdist); one BLAS thread per worker avoids oversubscription.
 test: $(VENV)/.installed-test
-	$(BIN)/python -m pytest -q
+	OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 $(BIN)/python -m pytest -q -n auto
 
 bench: $(VENV)/.installed-test
 	$(PIP) install -q -e '.[bench]'
