@@ -395,6 +395,33 @@ def run_joints(recording: str | Path, out: str | Path, method: str = "auto") -> 
 STEP1 = ("I", "mglx", "mgly", "c", "v", "J", "b")
 
 
+def joint_signals(rec: Recording, angles_csv: str | Path, joint: int, min_valid: float = 0.95):
+    """A joint's link angle (from `run_joints`' angles CSV) and its controller signals on one clock.
+
+    Returns (t, q, q_m, u, n_filled): the mocap samples on the controller clock, the link angle
+    with short gaps filled by interpolation (n_filled of them), and the logged motor angle and
+    torque low-passed (zero phase, 100 Hz or 0.45 x their rate) and interpolated there; samples
+    outside the controller log are dropped.
+    """
+    from .io import read_csv_columns
+    from .ident.twostep import controller_on
+
+    spec, log = rec.joints[joint], rec.controller
+    a = read_csv_columns(angles_csv)
+    t, q = a["t_controller"], a["q"]
+    ok = np.isfinite(q)
+    if ok.mean() < min_valid:
+        raise InputError(rec.root, f"joints[{spec.name}] link angle",
+                         f"a link angle in at least {100 * min_valid:.0f} % of the frames", f"{100 * ok.mean():.1f} %",
+                         hint="check the markers' visibility")
+    q = np.interp(t, t[ok], q[ok])
+    cutoff = min(100.0, 0.45 * log.rate_hz)
+    q_m = controller_on(t, log.t, log.q_m[:, joint], log.rate_hz, cutoff)
+    u = controller_on(t, log.t, log.tau[:, joint], log.rate_hz, cutoff)
+    g = np.isfinite(q_m) & np.isfinite(u)
+    return t[g], q[g], q_m[g], u[g], int((~ok).sum())
+
+
 def identify_recording(recording: str | Path, out: str | Path, cutoff_hz: float = 10.0, decimate: int = 2) -> list[dict]:
     """Two-step identification (seed 000 §II.A) of every joint of one recording.
 
@@ -403,29 +430,17 @@ def identify_recording(recording: str | Path, out: str | Path, cutoff_hz: float 
     spring torque and selects a spring model by held-out error; the one-step formulation (eq. 4)
     is solved as the baseline. Returns one dict per joint.
     """
-    from .io import read_csv_columns
     from .ident.springs import select_spring_model
-    from .ident.twostep import controller_on, identify_joint
+    from .ident.twostep import identify_joint
 
     out = Path(out)
     rec = load_recording(recording)
     run_joints(recording, out / "joints")
-    log = rec.controller
     results = []
     for i, spec in enumerate(rec.joints):
-        a = read_csv_columns(out / "joints" / f"{spec.name}.angles.csv")
-        t, q = a["t_controller"], a["q"]
-        ok = np.isfinite(q)
-        if ok.mean() < 0.95:
-            raise InputError(rec.root, f"joints[{spec.name}] link angle", "a link angle in at least 95 % of the frames",
-                             f"{100 * ok.mean():.1f} %", hint="check the markers' visibility")
-        q = np.interp(t, t[ok], q[ok])  # short gaps only (counted in the angles file)
-        q_m = controller_on(t, log.t, log.q_m[:, i], log.rate_hz, min(100.0, 0.45 * log.rate_hz))
-        u = controller_on(t, log.t, log.tau[:, i], log.rate_hz, min(100.0, 0.45 * log.rate_hz))
-        g = np.isfinite(q_m) & np.isfinite(u)
+        t, q, q_m, u, n_filled = joint_signals(rec, out / "joints" / f"{spec.name}.angles.csv", i)
         try:
-            res = identify_joint(t[g], q[g], q_m[g], u[g], fs_hz=rec.markers.rate_hz, cutoff_hz=cutoff_hz,
-                                 decimate=decimate)
+            res = identify_joint(t, q, q_m, u, fs_hz=rec.markers.rate_hz, cutoff_hz=cutoff_hz, decimate=decimate)
             spring = select_spring_model(res.delta, res.tau_s, res.t)
         except InputError as e:
             raise InputError(rec.root, f"joints[{spec.name}] ({e.field})", e.expected, e.got, e.hint) from None
@@ -440,7 +455,7 @@ def identify_recording(recording: str | Path, out: str | Path, cutoff_hz: float 
             "torque_rms": res.torque_rms,
             "spring": {"model": spring.chosen.model, "params": spring.chosen.params, "r2": spring.r2,
                        "holdout_rms_Nm": spring.holdout_rms},
-            "frames_filled": int((~ok).sum()),
+            "frames_filled": n_filled,
         })
     return results
 

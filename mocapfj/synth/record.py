@@ -113,10 +113,14 @@ def scenario_urdf(scn: Scenario) -> str:
                      payload_kg=scn.payload_kg)
 
 
+def _column(r: SimulationResult, name: str) -> int:
+    """Column of joint `name` in a result (a single-joint result has one column)."""
+    return r.joint_names.index(name) if r.q.shape[1] > 1 else 0
+
+
 def _joint_signal(sim: dict[str, SimulationResult], scn: Scenario, name: str, field: str) -> np.ndarray:
     r = sim[name]
-    col = r.joint_names.index(name) if scn.model == "urdf" else 0
-    return getattr(r, field)[:, col]
+    return getattr(r, field)[:, _column(r, name)]
 
 
 def _mocap_times(scn: Scenario) -> tuple[np.ndarray, np.ndarray]:
@@ -160,7 +164,7 @@ def concealment(scn: Scenario, sim_true, sim_nominal, t_ctrl_of_mocap, deflectio
         d = {}
         for label, sim, delay in (("true", sim_true, _clock_delay(scn)), ("nominal", sim_nominal, 0.0)):
             r = sim[e.joint]
-            col = r.joint_names.index(e.joint) if scn.model == "urdf" else 0
+            col = _column(r, e.joint)
             q = _hermite(r.t, r.q[:, col], r.qd[:, col], s + delay)
             qm = _hermite(r.t, r.q_m[:, col], r.qd_m[:, col], s)
             d[label] = qm - q
@@ -336,7 +340,7 @@ def write_scenario_bundle(sr: SimulatedRecording, out_dir, scenario_file: Path |
     cols = {"time": sr.sim[names[0]].t}
     for name in names:
         r = sr.sim[name]
-        c = r.joint_names.index(name) if r.q.shape[1] > 1 else 0
+        c = _column(r, name)
         for field in ("q", "q_m", "u", "tau_s", "delta"):
             cols[f"{field}_{name}"] = getattr(r, field)[:, c]
     write_csv_columns(out / "truth.csv", cols)

@@ -8,8 +8,7 @@ import numpy as np
 import pytest
 
 from mocapfj import InputError
-from mocapfj.ident.twostep import controller_on, identify_joint
-from mocapfj.io import read_csv_columns
+from mocapfj.ident.twostep import identify_joint
 
 ROOT = Path(__file__).resolve().parents[2]
 # seed 000 Table I, joint 2 means (the pa10_joint2 scenario's true parameters)
@@ -50,28 +49,22 @@ def test_true_signals_recover_table1_joint2_and_two_step_is_better_conditioned(r
 
 @pytest.fixture(scope="module")
 def chain(recorded, tmp_path_factory):
-    from mocapfj.pipeline import run_joints
+    from mocapfj.pipeline import joint_signals, run_joints
     from mocapfj.synth.record import write_scenario_bundle
 
     d = tmp_path_factory.mktemp("twostep")
     write_scenario_bundle(recorded, d / "bundle")
     run_joints(d / "bundle", d / "out")
-    a = read_csv_columns(d / "out" / "j2.angles.csv")
-    log = recorded.recording.controller
-    t, q = a["t_controller"], a["q"]
-    ok = np.isfinite(q)
-    q = np.interp(t, t[ok], q[ok])                                  # fill the (rare) occluded frames
-    q_m = controller_on(t, log.t, log.q_m[:, 0], 1000.0, 100.0)     # 1 kHz log onto the 250 Hz mocap clock
-    u = controller_on(t, log.t, log.tau[:, 0], 1000.0, 100.0)
-    g = np.isfinite(q_m) & np.isfinite(u)
-    res = identify_joint(t[g], q[g], q_m[g], u[g], fs_hz=250.0, cutoff_hz=10.0, decimate=2)
+    # the 1 kHz log onto the 250 Hz mocap clock, the (rare) occluded frames filled
+    t, q, q_m, u, n_filled = joint_signals(recorded.recording, d / "out" / "j2.angles.csv", 0)
+    res = identify_joint(t, q, q_m, u, fs_hz=250.0, cutoff_hz=10.0, decimate=2)
     err = _rel_err(res.step1, TABLE1_J2)
     err["k (two-step)"] = 100.0 * (res.spring["k"] / K_J2 - 1.0)
     err["k (one-step)"] = 100.0 * (res.one_step["k"] / K_J2 - 1.0)
     err["I+J"] = 100.0 * ((res.step1["I"] + res.step1["J"]) / (TABLE1_J2["I"] + TABLE1_J2["J"]) - 1.0)
     err["v+b"] = 100.0 * ((res.step1["v"] + res.step1["b"]) / (TABLE1_J2["v"] + TABLE1_J2["b"]) - 1.0)
     print("full chain, error %:", {k: round(v, 2) for k, v in err.items()},
-          "rel std %:", dict(zip(res.step1.names, np.round(res.step1.rel_std_pct, 2))), "n missing q:", int((~ok).sum()))
+          "rel std %:", dict(zip(res.step1.names, np.round(res.step1.rel_std_pct, 2))), "n missing q:", n_filled)
     return res, err
 
 
@@ -121,7 +114,7 @@ def test_bad_input_is_refused():
 @pytest.fixture(scope="module")
 def chain_60s(tmp_path_factory):
     """The full 60 s pa10_joint2 recording through mocapfj joints (the issue's acceptance data)."""
-    from mocapfj.pipeline import run_joints
+    from mocapfj.pipeline import joint_signals, run_joints
     from mocapfj.synth.record import record_scenario, write_scenario_bundle
     from mocapfj.synth.scenario import load_scenario
 
@@ -129,15 +122,7 @@ def chain_60s(tmp_path_factory):
     sr = record_scenario(load_scenario(ROOT / "datasets" / "pa10_joint2.toml"), with_concealment=False)
     write_scenario_bundle(sr, d / "bundle")
     run_joints(d / "bundle", d / "out")
-    a = read_csv_columns(d / "out" / "j2.angles.csv")
-    log = sr.recording.controller
-    t, q = a["t_controller"], a["q"]
-    ok = np.isfinite(q)
-    q = np.interp(t, t[ok], q[ok])
-    q_m = controller_on(t, log.t, log.q_m[:, 0], 1000.0, 100.0)
-    u = controller_on(t, log.t, log.tau[:, 0], 1000.0, 100.0)
-    g = np.isfinite(q_m) & np.isfinite(u)
-    return t[g], q[g], q_m[g], u[g]
+    return joint_signals(sr.recording, d / "out" / "j2.angles.csv", 0)[:4]
 
 
 def test_motor_first_identifies_every_parameter_through_the_full_chain(chain_60s):
