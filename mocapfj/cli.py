@@ -130,7 +130,7 @@ def _cmd_joints(args) -> int:
 def _cmd_identify(args) -> int:
     from .pipeline import run_identify
 
-    s = run_identify(args.recordings, args.out, cutoff_hz=args.cutoff, decimate=args.decimate)
+    s = run_identify(args.recordings, args.out, method=args.method, cutoff_hz=args.cutoff, decimate=args.decimate)
 
     def human(s):
         lines = [f"identified {len(s['recordings'])} recording(s)"]
@@ -196,10 +196,13 @@ def build_parser() -> argparse.ArgumentParser:
     jn.add_argument("--json", action="store_true", help="print a JSON summary on stdout")
     jn.set_defaults(func=_cmd_joints)
 
-    idf = sub.add_parser("identify", help="two-step identification of joint dynamics (seed 000)")
+    idf = sub.add_parser("identify", help="identification of joint dynamics and spring model (seed 000 §II)")
     idf.add_argument("recordings", nargs="+", help="recording bundles; repeats of the same joints give CV %%")
     idf.add_argument("--out", required=True, help="output directory")
-    idf.add_argument("--cutoff", type=float, default=10.0, help="low-pass on the angles before differentiation, Hz")
+    idf.add_argument("--method", default="motor_first", choices=["motor_first", "seed"],
+                     help="motor_first (default: motor equation, then link equation) or seed (seed 000's step 1)")
+    idf.add_argument("--cutoff", type=float, default=None,
+                     help="seed method: low-pass on the angles before differentiation, Hz (default 10)")
     idf.add_argument("--decimate", type=int, default=2, help="parallel decimation factor")
     idf.add_argument("--json", action="store_true", help="print a JSON summary on stdout")
     idf.set_defaults(func=_cmd_identify)

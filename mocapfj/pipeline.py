@@ -422,17 +422,97 @@ def joint_signals(rec: Recording, angles_csv: str | Path, joint: int, min_valid:
     return t[g], q[g], q_m[g], u[g], int((~ok).sum())
 
 
-def identify_recording(recording: str | Path, out: str | Path, cutoff_hz: float = 10.0, decimate: int = 2) -> list[dict]:
-    """Two-step identification (seed 000 §II.A) of every joint of one recording.
+IDENTIFY_METHODS = ("motor_first", "seed")
 
-    Runs `run_joints` into OUT/joints, puts the link angle and the controller log on the mocap
-    samples (controller clock), identifies step 1 (I, mglx, mgly, c, v, J, b), reconstructs the
-    spring torque and selects a spring model by held-out error; the one-step formulation (eq. 4)
-    is solved as the baseline. Returns one dict per joint.
+
+def _spring_pairs(mf, fs_hz: float, cutoff_hz: float = 10.0, rate_hz: float = 50.0):
+    """(delta, tau_s, t) for spring selection from a motor-first result: both low-passed at
+    `cutoff_hz` (mocap noise in delta would otherwise hide a 10 % nonlinearity) and kept at
+    `rate_hz` (nearly independent samples; the hysteresis fit is 5x cheaper)."""
+    from .ident.conditioning import lowpass
+
+    stride = max(1, int(round(fs_hz / rate_hz)))
+    return (lowpass(mf.delta, fs_hz, cutoff_hz)[::stride], lowpass(mf.tau_s, fs_hz, cutoff_hz)[::stride],
+            mf.t[::stride])
+
+
+def identify_signals(t, q, q_m, u, fs_hz: float, method: str = "motor_first", cutoff_hz: float | None = None,
+                     decimate: int = 2, spring_models=None) -> dict:
+    """Identify one joint from its signals on one clock (t, q, q_m, u: s, rad, rad, N m, link side).
+
+    Both formulations run: seed 000's two-step (eq. 5-7) and one-step (eq. 4) give the condition
+    numbers seed 000 compares and the one-step k; `method` chooses whose parameters are reported:
+    "motor_first" (default, :mod:`mocapfj.ident.motorfirst`, the one that resolves the link/motor
+    split through mocap) or "seed" (step 1 of eq. 6 with the spring of eq. 7). The spring model is
+    then selected by held-out error among `spring_models` (default all) on that method's
+    (deflection, spring torque) pairs. `cutoff_hz` is the seed method's low-pass (default 10 Hz);
+    motor-first uses its documented defaults. Returns a dict (see `run_identify`).
     """
-    from .ident.springs import select_spring_model
+    from .ident.motorfirst import identify_joint_motor_first
+    from .ident.springs import SPRING_FITTERS, select_spring_model
     from .ident.twostep import identify_joint
 
+    if method not in IDENTIFY_METHODS:
+        raise InputError(None, "method", f"one of {list(IDENTIFY_METHODS)}", repr(method))
+    seed = identify_joint(t, q, q_m, u, fs_hz=fs_hz, cutoff_hz=10.0 if cutoff_hz is None else cutoff_hz,
+                          decimate=decimate)
+    out = {"method": method, "cond_two_step": seed.cond_two_step, "cond_one_step": seed.cond_one_step,
+           "k_one_step": seed.one_step["k"], "seed_step1": seed.step1}
+    models = tuple(spring_models or SPRING_FITTERS)
+    if method == "seed":
+        values = {n: (seed.step1[n], seed.step1.std[i]) for i, n in enumerate(STEP1)}
+        values["k"] = (seed.spring["k"], seed.spring.std[0])
+        out.update(torque_rms=seed.torque_rms, q_zero_rad=seed.q_zero_rad)
+        ts, tau_s, delta = seed.t, seed.tau_s, seed.delta
+        spring = select_spring_model(delta, tau_s, ts, models=models)
+    else:
+        # a linear pass (which also tests the motor equation for a hysteretic spring); without
+        # hysteresis the spring model is selected on its pairs and, when it is not linear, the motor
+        # equation is solved again with that shape and the spring refitted on the new pairs
+        mf = identify_joint_motor_first(t, q, q_m, u, fs_hz=fs_hz, decimate=decimate)
+        if mf.hysteresis is not None:
+            spring = _hysteretic_spring(mf, fs_hz)
+        else:
+            spring = select_spring_model(*_spring_pairs(mf, fs_hz), models=tuple(m for m in models if m != "bouc_wen"))
+            if spring.chosen.model != "linear":
+                mf = identify_joint_motor_first(t, q, q_m, u, fs_hz=fs_hz, decimate=decimate,
+                                                spring=spring.chosen.predict, q_zero_rad=mf.q_zero_rad)
+                spring = select_spring_model(*_spring_pairs(mf, fs_hz), models=(spring.chosen.model, "linear"))
+        values = {}
+        for n in (*STEP1, "k"):
+            part = mf.link if n in mf.link.names else mf.motor
+            values[n] = (part[n], float(part.std[part.names.index(n)]))
+        out.update(torque_rms=mf.motor.residual_rms, q_zero_rad=mf.q_zero_rad, cond_motor=mf.motor.cond,
+                   cond_link=mf.link.cond)
+    out["values"] = values
+    out["spring"] = spring if isinstance(spring, dict) else {
+        "model": spring.chosen.model, "params": {k: float(v) for k, v in spring.chosen.params.items()},
+        "r2": spring.r2, "holdout_rms_Nm": spring.holdout_rms}
+    return out
+
+
+def _hysteretic_spring(mf, fs_hz: float) -> dict:
+    """The Bouc-Wen spring the motor equation found, with its r2 on the spring pairs."""
+    from .ident.springs import bouc_wen_states
+
+    h = mf.hysteresis
+    d, tau, _ = _spring_pairs(mf, fs_hz)
+    pred = h["alpha"] * h["k"] * d + (1 - h["alpha"]) * h["k"] * bouc_wen_states(d, 1.0, h["beta"], h["gamma"])
+    r = tau - pred
+    r -= r.mean()                                             # the torque offset
+    dev = tau - tau.mean()
+    return {"model": "bouc_wen", "params": {n: h[n] for n in ("k", "alpha", "beta", "gamma")},
+            "r2": float(1 - (r @ r) / (dev @ dev)), "motor_rms_gain_pct": h["rms_gain_pct"]}
+
+
+def identify_recording(recording: str | Path, out: str | Path, method: str = "motor_first",
+                       cutoff_hz: float | None = None, decimate: int = 2) -> list[dict]:
+    """Identify every joint of one recording (`identify_signals` per joint).
+
+    Runs `run_joints` into OUT/joints, puts the link angle and the controller log on the mocap
+    samples (controller clock, `joint_signals`) and identifies each joint. Returns one dict per
+    joint.
+    """
     out = Path(out)
     rec = load_recording(recording)
     run_joints(recording, out / "joints")
@@ -440,33 +520,19 @@ def identify_recording(recording: str | Path, out: str | Path, cutoff_hz: float 
     for i, spec in enumerate(rec.joints):
         t, q, q_m, u, n_filled = joint_signals(rec, out / "joints" / f"{spec.name}.angles.csv", i)
         try:
-            res = identify_joint(t, q, q_m, u, fs_hz=rec.markers.rate_hz, cutoff_hz=cutoff_hz, decimate=decimate)
-            spring = select_spring_model(res.delta, res.tau_s, res.t)
+            res = identify_signals(t, q, q_m, u, rec.markers.rate_hz, method, cutoff_hz, decimate)
         except InputError as e:
             raise InputError(rec.root, f"joints[{spec.name}] ({e.field})", e.expected, e.got, e.hint) from None
-        results.append({
-            "name": spec.name,
-            "recording": rec.name,
-            "step1": res.step1,
-            "k": res.spring,
-            "one_step": res.one_step,
-            "cond_two_step": res.cond_two_step,
-            "cond_one_step": res.cond_one_step,
-            "torque_rms": res.torque_rms,
-            "spring": {"model": spring.chosen.model, "params": spring.chosen.params, "r2": spring.r2,
-                       "holdout_rms_Nm": spring.holdout_rms},
-            "frames_filled": n_filled,
-        })
+        results.append({"name": spec.name, "recording": rec.name, "frames_filled": n_filled, **res})
     return results
 
 
 def _param_table(trials: list[dict]) -> tuple[dict, dict | None]:
     """Per parameter {value, std, rel_std_pct}: one trial's LS statistics, or the mean and SD over trials."""
     names = list(STEP1) + ["k"]
-    vals = np.array([[t["step1"][n] for n in STEP1] + [t["k"]["k"]] for t in trials])
+    vals = np.array([[t["values"][n][0] for n in names] for t in trials])
     if len(trials) == 1:
-        r1, rk = trials[0]["step1"], trials[0]["k"]
-        std = np.concatenate([r1.std, [rk.std[rk.names.index("k")]]])
+        std = np.array([trials[0]["values"][n][1] for n in names])
         cv = None
     else:
         std = vals.std(axis=0, ddof=1)
@@ -477,7 +543,16 @@ def _param_table(trials: list[dict]) -> tuple[dict, dict | None]:
     return params, cv
 
 
-def run_identify(recordings, out: str | Path, cutoff_hz: float = 10.0, decimate: int = 2) -> dict:
+def _common_spring(trials: list[dict]) -> dict:
+    """The spring model most trials chose (the earliest on a tie), with the first such trial's fit
+    and how many trials chose it."""
+    models = [t["spring"]["model"] for t in trials]
+    best = max(dict.fromkeys(models), key=models.count)
+    return {**next(t["spring"] for t in trials if t["spring"]["model"] == best), "n_trials_chosen": models.count(best)}
+
+
+def run_identify(recordings, out: str | Path, method: str = "motor_first", cutoff_hz: float | None = None,
+                 decimate: int = 2) -> dict:
     """``mocapfj identify``: identify every joint of one or more recordings; repeats give CV %.
 
     Writes OUT/<recording>/ (joints output), OUT/identify.json, and a seed-000-Table-I-style table
@@ -489,21 +564,25 @@ def run_identify(recordings, out: str | Path, cutoff_hz: float = 10.0, decimate:
     out = Path(out)
     per_joint: dict[str, list[dict]] = {}
     for k, r in enumerate(recordings):
-        for res in identify_recording(r, out / f"{k:02d}_{Path(r).name}", cutoff_hz, decimate):
+        for res in identify_recording(r, out / f"{k:02d}_{Path(r).name}", method, cutoff_hz, decimate):
             per_joint.setdefault(res["name"], []).append(res)
     joints = []
     for name, trials in per_joint.items():
         params, cv = _param_table(trials)
         j = {
             "name": name,
+            "method": method,
             "params": params,
             "cond_two_step": float(np.mean([t["cond_two_step"] for t in trials])),
             "cond_one_step": float(np.mean([t["cond_one_step"] for t in trials])),
             "torque_rms": float(np.mean([t["torque_rms"] for t in trials])),
-            "k_one_step": float(np.mean([t["one_step"]["k"] for t in trials])),
-            "spring": trials[0]["spring"],
+            "k_one_step": float(np.mean([t["k_one_step"] for t in trials])),
+            "spring": _common_spring(trials),
             "n_trials": len(trials),
         }
+        if method == "motor_first":
+            j["cond_motor"] = float(np.mean([t["cond_motor"] for t in trials]))
+            j["cond_link"] = float(np.mean([t["cond_link"] for t in trials]))
         if cv is not None:
             j["cv_pct"] = cv
         joints.append(j)

@@ -7,6 +7,7 @@
 - :mod:`.twostep`: seed 000 two-step method and the one-step baseline.
 - :mod:`.motorfirst`: motor equation first, then the link equation (for noisy mocap link angles).
 - :mod:`.springs`: spring and hysteresis models fitted to (deflection, spring torque), selection.
+- :mod:`.friction`: friction from constant-velocity sweeps (seed 001 eq. 7, seed 002 eq. 18) and pre-sliding.
 - :mod:`.excitation`: Fourier motor references (seed 000 eq. 9) minimising the regressor's condition number (eq. 8).
 
 See docs/architecture.md for what this package owns and may import.
@@ -15,6 +16,8 @@ See docs/architecture.md for what this package owns and may import.
 from .conditioning import decimate_parallel, derivatives, lowpass, resample_to
 from .excitation import (ExcitationDesign, design_excitation, reference_condition, reference_motion,
                          simulated_condition, write_reference)
+from .friction import (FrictionFit, PreslidingFit, SweepPoints, fit_extended_stribeck, fit_presliding,
+                       fit_stribeck, sweep_points)
 from .idim import IDIM_MODELS, idim_cross_validation, idim_ls, idim_observation, idim_regressor, load_emps_mat
 from .ls import cv_pct, ls_fit, unidentifiable_columns
 from .motorfirst import MotorFirstResult, identify_joint_motor_first
@@ -33,4 +36,6 @@ __all__ = [
     "fit_backlash", "fit_bouc_wen", "bouc_wen_states",
     "ExcitationDesign", "design_excitation", "reference_condition", "reference_motion", "simulated_condition",
     "write_reference",
+    "sweep_points", "SweepPoints", "fit_stribeck", "fit_extended_stribeck", "fit_presliding", "FrictionFit",
+    "PreslidingFit",
 ]
