@@ -17,7 +17,11 @@ linear spring of eq. 7), whose accuracy on the same trials is printed beside.
 from __future__ import annotations
 
 import argparse
+import os
 import sys
+
+for _v in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_v, "1")        # one BLAS thread per process: the 2 cores go to the 2 workers
 import time
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import replace

@@ -395,13 +395,16 @@ def run_joints(recording: str | Path, out: str | Path, method: str = "auto") -> 
 STEP1 = ("I", "mglx", "mgly", "c", "v", "J", "b")
 
 
-def joint_signals(rec: Recording, angles_csv: str | Path, joint: int, min_valid: float = 0.95):
+def joint_signals(rec: Recording, angles_csv: str | Path, joint: int, min_valid: float = 0.95,
+                  max_gap_s: float = 0.1):
     """A joint's link angle (from `run_joints`' angles CSV) and its controller signals on one clock.
 
     Returns (t, q, q_m, u, n_filled): the mocap samples on the controller clock, the link angle
-    with short gaps filled by interpolation (n_filled of them), and the logged motor angle and
-    torque low-passed (zero phase, 100 Hz or 0.45 x their rate) and interpolated there; samples
-    outside the controller log are dropped.
+    with gaps of up to `max_gap_s` filled by interpolation (n_filled samples: a counted repair),
+    and the logged motor angle and torque low-passed (zero phase, 100 Hz or 0.45 x their rate)
+    and interpolated there; samples outside the controller log are dropped. A longer gap, less
+    than `min_valid` of the frames with an angle, or a NaN in the controller log is refused with
+    the time it happens: interpolation across it would invent the motion the identification fits.
     """
     from .io import read_csv_columns
     from .ident.twostep import controller_on
@@ -414,7 +417,23 @@ def joint_signals(rec: Recording, angles_csv: str | Path, joint: int, min_valid:
         raise InputError(rec.root, f"joints[{spec.name}] link angle",
                          f"a link angle in at least {100 * min_valid:.0f} % of the frames", f"{100 * ok.mean():.1f} %",
                          hint="check the markers' visibility")
+    if not ok.all():
+        edges = np.diff(np.concatenate([[0], (~ok).astype(np.int8), [0]]))
+        starts, stops = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)
+        dt = float(np.median(np.diff(t)))
+        longest = int(np.argmax(stops - starts))
+        gap = (stops[longest] - starts[longest] + 1) * dt
+        if gap > max_gap_s:
+            raise InputError(angles_csv, f"q (joint {spec.name})", f"gaps in the link angle of at most {max_gap_s:g} s",
+                             f"{gap:.3f} s without an angle from t = {t[starts[longest]]:.3f} s",
+                             hint="cut the trial around the gap, or check the markers' visibility there")
     q = np.interp(t, t[ok], q[ok])
+    for name, x in (("q_m", log.q_m[:, joint]), ("tau", log.tau[:, joint])):
+        bad = ~np.isfinite(x)
+        if bad.any():
+            raise InputError(rec.root, f"controller log {name} (joint {spec.name})", "finite samples",
+                             f"{int(bad.sum())} NaN, the first at t = {log.t[np.argmax(bad)]:.4f} s",
+                             hint="cut the trial where the log is complete")
     cutoff = min(100.0, 0.45 * log.rate_hz)
     q_m = controller_on(t, log.t, log.q_m[:, joint], log.rate_hz, cutoff)
     u = controller_on(t, log.t, log.tau[:, joint], log.rate_hz, cutoff)
@@ -579,6 +598,7 @@ def run_identify(recordings, out: str | Path, method: str = "motor_first", cutof
             "k_one_step": float(np.mean([t["k_one_step"] for t in trials])),
             "spring": _common_spring(trials),
             "n_trials": len(trials),
+            "frames_filled": int(sum(t["frames_filled"] for t in trials)),
         }
         if method == "motor_first":
             j["cond_motor"] = float(np.mean([t["cond_motor"] for t in trials]))
