@@ -468,7 +468,7 @@ def identify_signals(t, q, q_m, u, fs_hz: float, method: str = "motor_first", cu
     motor-first uses its documented defaults. Returns a dict (see `run_identify`).
     """
     from .ident.motorfirst import identify_joint_motor_first
-    from .ident.springs import SPRING_FITTERS, select_spring_model
+    from .ident.springs import HYSTERETIC, SPRING_FITTERS, select_spring_model
     from .ident.twostep import identify_joint
 
     if method not in IDENTIFY_METHODS:
@@ -492,7 +492,7 @@ def identify_signals(t, q, q_m, u, fs_hz: float, method: str = "motor_first", cu
         if mf.hysteresis is not None:
             spring = _hysteretic_spring(mf, fs_hz)
         else:
-            spring = select_spring_model(*_spring_pairs(mf, fs_hz), models=tuple(m for m in models if m != "bouc_wen"))
+            spring = select_spring_model(*_spring_pairs(mf, fs_hz), models=tuple(m for m in models if m not in HYSTERETIC))
             if spring.chosen.model != "linear":
                 mf = identify_joint_motor_first(t, q, q_m, u, fs_hz=fs_hz, decimate=decimate,
                                                 spring=spring.chosen.predict, q_zero_rad=mf.q_zero_rad)

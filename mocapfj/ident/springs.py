@@ -9,6 +9,10 @@ Models (signs and units: docs/conventions.md; elements: :mod:`mocapfj.dynamics`)
 - ``piecewise``: tau_s = PiecewiseSpring(k1, k2, k3, tau1, tau2)(delta - d0)  (nonlinear LS)
 - ``backlash``:  tau_s = Backlash(gap, LinearSpring(k))(delta - d0)           (nonlinear LS)
 - ``bouc_wen``:  tau_s = BoucWen(k, alpha, beta, gamma)(delta - d0) along the path (output error)
+- ``dahl``:      tau_s = Dahl(sigma, fc, k0)(delta - d0) along the path (output error)
+- ``maxwell_slip``: tau_s = k0 delta + sum_i k_i play_{r_i}(delta) + tau0: for given thresholds r_i
+  the weights k_i >= 0 by bounded linear least squares (the classical identification of
+  Maxwell-slip / Prandtl-Ishlinskii operators), the thresholds by variable projection
 
 The offsets: tau0 (a torque offset) for the models linear in their parameters, d0 (a deflection
 offset: the mocap zero, see mocapfj.ident.twostep) for the nonlinear ones.
@@ -26,14 +30,14 @@ from dataclasses import dataclass, field
 from typing import Callable
 
 import numpy as np
-from scipy.optimize import least_squares
+from scipy.optimize import least_squares, lsq_linear
 
-from ..dynamics import Backlash, BoucWen, CubicSpring, LinearSpring, PiecewiseSpring
+from ..dynamics import Backlash, BoucWen, CubicSpring, Dahl, LinearSpring, MaxwellSlip, PiecewiseSpring
 from ..errors import InputError
 from .ls import ls_fit
 
 __all__ = ["SpringFit", "SpringSelection", "fit_linear", "fit_cubic", "fit_piecewise", "fit_backlash",
-           "fit_bouc_wen", "bouc_wen_states", "select_spring_model", "SPRING_FITTERS"]
+           "fit_bouc_wen", "fit_dahl", "fit_maxwell_slip", "HYSTERETIC", "bouc_wen_states", "select_spring_model", "SPRING_FITTERS"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -254,11 +258,89 @@ def fit_bouc_wen(delta, tau_s, t, *, max_samples: int = 2000, max_nfev: int = 60
     return _finish("bouc_wen", params, el, 5, lambda dd, tt_: model(x, dd), d, y, tt)
 
 
+def fit_dahl(delta, tau_s, t, *, max_nfev: int = 100) -> SpringFit:
+    """Dahl element (exponent 1) in parallel with a linear spring, of delta - d0, by output error.
+
+    Parameters sigma (N m / rad, the element's rest stiffness), fc (N m, its saturation), k0
+    (N m / rad), d0 (rad). Each evaluation is the element's exact run along the path (a
+    vectorised scan, linear between samples); deterministic starts over fc.
+    """
+    d, y, tt = _check(delta, tau_s, t)
+    lin = fit_linear(d, y)
+    k = lin.params["k"]
+    tmax = float(np.max(np.abs(y - y.mean())))
+    span = float(np.ptp(d))
+    d00 = -lin.params["tau0"] / k
+
+    def model(x, dd, tt_):
+        return Dahl(sigma=x[0], fc=x[1], k0=x[2]).run(dd - x[3], tt_)
+
+    def resid(x):
+        return model(x, d, tt) - y
+
+    lb = np.array([1e-2 * k, 1e-4 * tmax, 0.0, -np.inf])
+    ub = np.array([1e4 * k, 2 * tmax, 1e2 * k, np.inf])
+    starts = [np.array([s * k, f * tmax, (1 - f) * k, d00]) for s, f in ((1.0, 0.1), (3.0, 0.3), (10.0, 0.05))]
+    x = _nls(resid, starts, lb, ub, np.array([k, tmax, k, max(span / 10, 1e-6)]), max_nfev)
+    el = Dahl(sigma=x[0], fc=x[1], k0=x[2])
+    return _finish("dahl", {"sigma": x[0], "fc": x[1], "k0": x[2], "d0": x[3]}, el, 4,
+                   lambda dd, tt_: model(x, dd, tt_), d, y, tt)
+
+
+def fit_maxwell_slip(delta, tau_s, t, *, n_elements: int = 3, max_nfev: int = 60) -> SpringFit:
+    """Rate-independent Maxwell-slip operator: k0 delta + sum_i k_i play_{r_i}(delta) + tau0.
+
+    For given slip thresholds r_i (rad) the torque is linear in (k0, k_1..k_N, tau0), solved with
+    k_i >= 0 (scipy.optimize.lsq_linear); the thresholds are found by variable projection
+    (least_squares on ln r_i within 0.1 % to 50 % of the deflection span, started from a
+    geometric grid over 1 % to 40 %; a threshold beyond half the span would make its element a
+    copy of the linear term). Elements with k_i = 0 are dropped from the element. Parameters k0, k_i (N m / rad),
+    f_i = k_i r_i (N m), tau0 (N m).
+    """
+    d, y, tt = _check(delta, tau_s, t)
+    span = float(np.ptp(d))
+    if not span > 0:
+        raise InputError(None, "delta", "a deflection that moves", "a constant deflection")
+    n = int(n_elements)
+
+    def basis(r, dd, tt_):
+        plays = MaxwellSlip(k=tuple(np.ones(n)), f=tuple(r)).run_states(dd, tt_)    # k_i = 1: play outputs
+        return np.column_stack([dd, plays, np.ones_like(dd)])
+
+    lb = np.r_[-np.inf, np.zeros(n), -np.inf]
+    ub = np.full(n + 2, np.inf)
+
+    def weights(r):
+        B = basis(r, d, tt)
+        scale = np.linalg.norm(B, axis=0)
+        scale[scale == 0] = 1.0
+        return B, lsq_linear(B / scale, y, bounds=(lb, ub)).x / scale
+
+    def resid(x):
+        B, c = weights(np.exp(x))
+        return B @ c - y
+
+    x0 = np.log(span * np.geomspace(0.01, 0.4, n))
+    x = least_squares(resid, x0, bounds=(np.log(1e-3 * span), np.log(0.5 * span)), max_nfev=max_nfev).x
+    r = np.exp(x)
+    _, c = weights(r)
+    k0, ks, tau0 = float(c[0]), c[1:-1], float(c[-1])
+    ks = np.where(ks > 1e-9 * max(abs(k0), float(ks.max()), 1e-300), ks, 0.0)     # lsq_linear leaves denormals at the bound
+    keep = (ks > 0) & (ks * r > 0)
+    params = {"k0": k0, **{f"k{i + 1}": float(v) for i, v in enumerate(ks)},
+              **{f"f{i + 1}": float(v * ri) for i, (v, ri) in enumerate(zip(ks, r))}, "tau0": tau0}
+    el = MaxwellSlip(k=tuple(ks[keep]), f=tuple((ks * r)[keep]), k0=max(k0, 0.0)) if keep.any() else LinearSpring(k=k0)
+    return _finish("maxwell_slip", params, el, 2 * n + 2, lambda dd, tt_: basis(r, dd, tt_) @ c, d, y, tt)
+
+
 SPRING_FITTERS = {"linear": fit_linear, "cubic": fit_cubic, "piecewise": fit_piecewise,
-                  "backlash": fit_backlash, "bouc_wen": fit_bouc_wen}
+                  "backlash": fit_backlash, "bouc_wen": fit_bouc_wen, "dahl": fit_dahl,
+                  "maxwell_slip": fit_maxwell_slip}
+HYSTERETIC = ("bouc_wen", "dahl", "maxwell_slip")
 
 
-def select_spring_model(delta, tau_s, t, *, models=("linear", "cubic", "piecewise", "backlash", "bouc_wen"),
+def select_spring_model(delta, tau_s, t, *, models=("linear", "cubic", "piecewise", "backlash", "bouc_wen", "dahl",
+                                                    "maxwell_slip"),
                         holdout: float = 0.3, criterion: str = "bic", min_gain_pct: float = 2.0) -> SpringSelection:
     """Fit each model on the first 1 - `holdout` of the series and score it on the rest.
 

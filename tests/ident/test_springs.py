@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from mocapfj import InputError
-from mocapfj.dynamics import Backlash, BoucWen, CubicSpring, LinearSpring, PiecewiseSpring
+from mocapfj.dynamics import Backlash, BoucWen, CubicSpring, Dahl, LinearSpring, MaxwellSlip, PiecewiseSpring
 from mocapfj.ident.springs import bouc_wen_states, select_spring_model
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -88,6 +88,42 @@ def test_bouc_wen_is_recovered_and_selected():
     assert p["alpha"] == pytest.approx(0.93, abs=0.01)
     assert p["beta"] + p["gamma"] == pytest.approx(600.0, rel=0.15)     # the loop half-width 1/(beta+gamma)
     assert s.holdout_rms["bouc_wen"] < 1.1 * NOISE_NM < s.holdout_rms["linear"]
+
+
+def _loop_energy(tau, d):
+    """Closed integral of tau d(delta) along the path, J."""
+    return float(np.sum(0.5 * (tau[1:] + tau[:-1]) * np.diff(d)))
+
+
+def test_dahl_is_recovered_and_selected():
+    true = Dahl(sigma=4.0e4, fc=6.0, k0=9000.0)
+    t, d, tau = _data(true, 7)
+    s = select_spring_model(d, tau, t)
+    print({k: round(v, 4) for k, v in s.holdout_rms.items()}, s.chosen.params)
+    assert s.chosen.model == "dahl"
+    p = s.chosen.params
+    assert p["sigma"] == pytest.approx(4.0e4, rel=0.10)
+    assert p["fc"] == pytest.approx(6.0, rel=0.05)
+    assert p["k0"] == pytest.approx(9000.0, rel=0.02)
+    assert s.holdout_rms["dahl"] < 1.1 * NOISE_NM < s.holdout_rms["linear"]
+
+
+def test_maxwell_slip_is_recovered_and_selected():
+    """Three elements, thresholds by variable projection: measured k0 6002, (k, f) pairs
+    (2998, 1.007), (1998, 2.992), (1499, 5.996), prediction within 0.006 N m of the truth."""
+    true = MaxwellSlip(k=(3000.0, 2000.0, 1500.0), f=(1.0, 3.0, 6.0), k0=6000.0)
+    t, d, tau = _data(true, 8)
+    s = select_spring_model(d, tau, t)
+    print({k: round(v, 4) for k, v in s.holdout_rms.items()}, s.chosen.params)
+    assert s.chosen.model == "maxwell_slip"
+    p = s.chosen.params
+    assert p["k0"] == pytest.approx(6000.0, rel=0.02)
+    pairs = sorted((p[f"f{i}"], p[f"k{i}"]) for i in (1, 2, 3))
+    for (f, k), (ft, kt) in zip(pairs, [(1.0, 3000.0), (3.0, 2000.0), (6.0, 1500.0)]):
+        assert f == pytest.approx(ft, rel=0.05) and k == pytest.approx(kt, rel=0.05)
+    assert s.holdout_rms["maxwell_slip"] < 1.1 * NOISE_NM < s.holdout_rms["linear"]
+    clean = true.run(d, t)
+    assert _loop_energy(s.chosen.predict(d, t), d) == pytest.approx(_loop_energy(clean, d), rel=0.02)
 
 
 def _scenario_truth(name):
