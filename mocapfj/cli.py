@@ -138,8 +138,9 @@ def _cmd_identify(args) -> int:
             p = j["params"]
             lines.append(f"  joint {j['name']} ({j['n_trials']} trial(s)): " + ", ".join(
                 f"{n} {p[n]['value']:.4g}" for n in ("I", "mglx", "mgly", "c", "v", "J", "b", "k")))
-            lines.append(f"    cond two-step {j['cond_two_step']:.0f} vs one-step {j['cond_one_step']:.0f}, torque RMS "
-                         f"{j['torque_rms']:.3g} N m, one-step k {j['k_one_step']:.4g}, spring {j['spring']['model']}")
+            lines.append(f"    method {j['method']}, spring {j['spring']['model']}, cond two-step {j['cond_two_step']:.0f} "
+                         f"vs one-step {j['cond_one_step']:.0f} (seed 000), torque RMS {j['torque_rms']:.3g} N m, "
+                         f"{j['frames_filled']} angle frames filled")
         lines.append(f"  wrote {args.out}/identify.json, table.md, table.csv")
         return "\n".join(lines)
 
