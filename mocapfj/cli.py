@@ -137,10 +137,16 @@ def _cmd_identify(args) -> int:
         for j in s["joints"]:
             p = j["params"]
             lines.append(f"  joint {j['name']} ({j['n_trials']} trial(s)): " + ", ".join(
-                f"{n} {p[n]['value']:.4g}" for n in ("I", "mglx", "mgly", "c", "v", "J", "b", "k")))
-            lines.append(f"    method {j['method']}, spring {j['spring']['model']}, cond two-step {j['cond_two_step']:.0f} "
-                         f"vs one-step {j['cond_one_step']:.0f} (seed 000), torque RMS {j['torque_rms']:.3g} N m, "
-                         f"{j['frames_filled']} angle frames filled")
+                f"{n} {p[n]['value']:.4g}" for n in ("I", "mglx", "mgly", "c", "v", "J", "b", "k") if n in p))
+            cond = (f", cond two-step {j['cond_two_step']:.0f} vs one-step {j['cond_one_step']:.0f} (seed 000)"
+                    if "cond_two_step" in j else "")
+            lines.append(f"    method {j['method']}, spring {j['spring']['model']}{cond}, torque RMS "
+                         f"{j['torque_rms']:.3g} N m, {j['frames_filled']} angle frames filled")
+        if "nlink" in s:
+            nl = s["nlink"]
+            lines.append(f"  links (URDF, {len(nl['base_params'])} base parameters, cond {nl['cond']:.0f}, torque RMS "
+                         f"{nl['torque_rms']:.3g} N m): " + ", ".join(
+                             f"{n} = {v['value']:.4g}" for n, v in nl["base_params"].items()))
         lines.append(f"  wrote {args.out}/identify.json, table.md, table.csv")
         return "\n".join(lines)
 

@@ -44,7 +44,8 @@ from .conditioning import decimate_parallel, derivatives, lowpass
 from .ls import ls_fit
 from .twostep import _check_inputs
 
-__all__ = ["MOTOR_NAMES", "LINK_NAMES", "MotorFirstResult", "identify_joint_motor_first"]
+__all__ = ["MOTOR_NAMES", "LINK_NAMES", "MotorFirstResult", "MotorStage", "motor_stage", "identify_joint_motor_first",
+           "white_noise_sd"]
 
 MOTOR_NAMES = ("J", "b", "k", "tau0")
 LINK_NAMES = ("I", "mglx", "mgly", "c", "v")
@@ -84,11 +85,33 @@ class MotorFirstResult:
         return np.array([self[n] for n in names])
 
 
-def identify_joint_motor_first(t, q, q_m, u, *, fs_hz: float, cutoff_hz: float = 5.0, link_cutoff_hz: float = 20.0,
-                               split_hz: float = 2.0, decimate: int = 2, sign_eps: float = 0.01,
+@dataclass(frozen=True, eq=False)
+class MotorStage:
+    """Result of :func:`motor_stage`: motor (LSResult of J, b, k, tau0), hysteresis (dict or None),
+    q_zero_rad (tau0 / k, rad), inner ((T,) bool: the samples inside the trims), and on all T
+    samples: t (s), tau_s (motor-side spring torque, N m), q_hat (rebuilt link angle, rad, referred
+    to the spring's zero), delta (mocap deflection referred to that zero, rad), all low-passed at
+    the link cut-off."""
+
+    motor: LSResult
+    hysteresis: dict | None
+    q_zero_rad: float
+    inner: np.ndarray
+    t: np.ndarray
+    tau_s: np.ndarray
+    q_hat: np.ndarray
+    delta: np.ndarray
+
+
+def motor_stage(t, q, q_m, u, *, fs_hz: float, cutoff_hz: float = 5.0, link_cutoff_hz: float = 20.0,
+                               split_hz: float = 2.0, decimate: int = 2,
                                trim_s: float = 1.0, spring=None, q_zero_rad: float = 0.0,
-                               hysteresis: bool = True, min_gain_pct: float = 2.0) -> MotorFirstResult:
-    """Identify J, b, k from the motor equation, then I, mglx, mgly, c, v from the link equation.
+                               hysteresis: bool = True, min_gain_pct: float = 2.0,
+                               bias_compensation: bool = True) -> MotorStage:
+    """The motor equation of one joint (J, b, k, tau0), its spring torque and the rebuilt link angle.
+
+    The first half of :func:`identify_joint_motor_first`, which documents the parameters (all but
+    `sign_eps`); the n-link identification (:mod:`.nlink`) runs it per joint.
 
     Parameters
     ----------
@@ -105,8 +128,6 @@ def identify_joint_motor_first(t, q, q_m, u, *, fs_hz: float, cutoff_hz: float =
         Cross-over of the rebuilt link angle between mocap deflection and tau_s / k, Hz.
     decimate : int
         Parallel decimation of the motor equation (seed 003 §3).
-    sign_eps : float
-        Samples with |q'| below this (rad/s) are left out of the link equation.
     trim_s : float
         Seconds dropped at both ends (filter transients).
     spring : callable, optional
@@ -147,6 +168,12 @@ def identify_joint_motor_first(t, q, q_m, u, *, fs_hz: float, cutoff_hz: float =
     u_c = lowpass(u, fs_hz, cutoff_hz)
     Wm, ym = decimate_parallel(Wm_full[inner], u_c[inner], decimate, fs_hz, min(cutoff_hz, 0.8 * fs_hz / (2 * decimate)))
     motor = ls_fit(Wm, ym, MOTOR_NAMES)
+    if bias_compensation and spring is None:
+        # errors in variables: the mocap noise in the deflection column attenuates k, and J and b
+        # (nearly collinear with it) take up the difference; remove the noise's share of W^T W
+        fc2 = min(cutoff_hz, 0.8 * fs_hz / (2 * decimate)) if decimate > 1 else None
+        var = white_noise_sd(q, fs_hz) ** 2 * _noise_gain2(fs_hz, cutoff_hz, fc2)
+        motor = _compensated(Wm, ym, motor, 2, var)
     if spring is not None:   # report k as the scale times the shape's mean slope (the linear equivalent)
         slope = float(np.polyfit(delta[inner], f_spring[inner], 1)[0])
         i = MOTOR_NAMES.index("k")
@@ -177,14 +204,112 @@ def identify_joint_motor_first(t, q, q_m, u, *, fs_hz: float, cutoff_hz: float =
             motor, hyst = hyst
             J, b, tau0 = motor["J"], motor["b"], motor["tau0"]
             tau_s, d_hat = rebuilt(J, b, hyst["k"], tau0)
-    qh = qmf - d_hat
+    return MotorStage(motor=motor, hysteresis=hyst, q_zero_rad=float(-e), inner=inner, t=t, tau_s=tau_s,
+                      q_hat=qmf - d_hat, delta=d_mocap)
+
+
+def identify_joint_motor_first(t, q, q_m, u, *, fs_hz: float, cutoff_hz: float = 5.0, link_cutoff_hz: float = 20.0,
+                               split_hz: float = 2.0, decimate: int = 2, sign_eps: float = 0.01,
+                               trim_s: float = 1.0, spring=None, q_zero_rad: float = 0.0,
+                               hysteresis: bool = True, min_gain_pct: float = 2.0,
+                               bias_compensation: bool = True) -> MotorFirstResult:
+    """Identify J, b, k from the motor equation, then I, mglx, mgly, c, v from the link equation.
+
+    Parameters
+    ----------
+    t, q, q_m, u : (T,) float
+        Times (s, uniform at fs_hz, one clock), link angle from mocap (rad), motor angle / N
+        (rad), motor torque x N (N m): the link side, docs/conventions.md.
+    fs_hz : float
+        Sampling rate, Hz.
+    cutoff_hz : float
+        Zero-phase low-pass of the motor equation (linear: sets only the noise), Hz.
+    link_cutoff_hz : float
+        Low-pass of the link equation and of the spring samples, Hz; below the Nyquist rate.
+    split_hz : float
+        Cross-over of the rebuilt link angle between mocap deflection and tau_s / k, Hz.
+    decimate : int
+        Parallel decimation of the motor equation (seed 003 §3).
+    sign_eps : float
+        Samples with |q'| below this (rad/s) are left out of the link equation.
+    trim_s : float
+        Seconds dropped at both ends (filter transients).
+    spring : callable, optional
+        A nonlinear spring shape f(delta, t) -> N m (e.g. a fitted `springs.SpringFit.predict`,
+        t in s) for the motor equation, which then reads J q_m'' + b q_m' + s f(delta) + tau0
+        = u, with delta = q_m - q + e low-passed as the equation and e = `q_zero_rad` (found by a
+        first, linear pass); the reported k is s times the shape's mean slope. Default: the
+        linear spring k delta, and e = tau0 / k.
+    q_zero_rad : float
+        The link-angle zero e of a first pass, for `spring`, rad (ignored without it).
+    hysteresis : bool
+        Test the motor equation for a hysteretic spring (see the module docstring) and, when it
+        is found, identify J, b and the Bouc-Wen spring together (ignored with `spring`).
+    min_gain_pct : float
+        The hysteretic spring is kept when it lowers the motor equation's residual RMS by at
+        least this much, %.
+    bias_compensation : bool
+        Remove the mocap noise's share from the normal equations of the motor equation (its
+        deflection column is noisy: errors in variables). The noise SD is read from the top
+        quarter of the link angle's spectrum (:func:`white_noise_sd`).
+
+    Raises
+    ------
+    InputError
+        Bad shapes, NaN, non-uniform time, a recording too short for the filters, a parameter
+        the trajectory does not excite (named), a spring that does not stiffen (k <= 0).
+    """
+    st = motor_stage(t, q, q_m, u, fs_hz=fs_hz, cutoff_hz=cutoff_hz, link_cutoff_hz=link_cutoff_hz,
+                     split_hz=split_hz, decimate=decimate, trim_s=trim_s, spring=spring, q_zero_rad=q_zero_rad,
+                     hysteresis=hysteresis, min_gain_pct=min_gain_pct, bias_compensation=bias_compensation)
+    qh, tau_s, inner = st.q_hat, st.tau_s, st.inner
     qd, qdd = derivatives(qh, fs_hz)
     # the Coulomb step gets the low-pass that tau_s (from filtered u) already had
     Wl = np.column_stack([qdd, -np.sin(qh), np.cos(qh), lowpass(np.sign(qd), fs_hz, link_cutoff_hz), qd])
     keep = inner & (np.abs(qd) > sign_eps)
     link = ls_fit(Wl[keep], tau_s[keep], LINK_NAMES)
-    return MotorFirstResult(motor=motor, link=link, q_zero_rad=float(-e), t=t[inner], tau_s=tau_s[inner],
-                            delta=d_mocap[inner], hysteresis=hyst)
+    return MotorFirstResult(motor=st.motor, link=link, q_zero_rad=st.q_zero_rad, t=st.t[inner], tau_s=tau_s[inner],
+                            delta=st.delta[inner], hysteresis=st.hysteresis)
+
+
+def white_noise_sd(x: np.ndarray, fs_hz: float) -> float:
+    """SD of the white measurement noise on x (T,), from the mean periodogram above fs/4 (where
+    a joint's motion has no power at mocap rates): E|X_f|^2 / T = sigma^2 for white noise."""
+    x = np.asarray(x, dtype=np.float64)
+    f = np.fft.rfftfreq(x.size, 1.0 / fs_hz)
+    P = np.abs(np.fft.rfft(x - x.mean())) ** 2 / x.size
+    band = (f > fs_hz / 4) & (f < 0.98 * fs_hz / 2)
+    return float(np.sqrt(P[band].mean())) if band.any() else 0.0
+
+
+def _noise_gain2(fs_hz: float, cutoff_hz: float, fc2: float | None) -> float:
+    """Variance gain of white noise through the motor equation's zero-phase low-passes: `cutoff_hz`,
+    then (with decimation) decimate_parallel's at `fc2` (None: no decimation)."""
+    n = int(40 * fs_hz / min(cutoff_hz, fc2 or cutoff_hz)) | 1
+    x = np.zeros(n)
+    x[n // 2] = 1.0
+    h = lowpass(x, fs_hz, cutoff_hz)
+    if fc2 is not None:
+        h = lowpass(h, fs_hz, fc2)
+    return float(h @ h)
+
+
+def _compensated(W: np.ndarray, y: np.ndarray, ls: LSResult, col: int, var: float) -> LSResult:
+    """Least squares with the noise variance `var` of column `col` taken out of W^T W (bias-
+    compensated LS for errors in variables); statistics as ls_fit's with the new solution."""
+    A = W.T @ W
+    A[col, col] -= W.shape[0] * var
+    if not np.all(np.linalg.eigvalsh(A) > 0):
+        return ls                       # the noise estimate exceeds the column's spread: keep LS
+    x = np.linalg.solve(A, W.T @ y)
+    r = y - W @ x
+    rss = float(r @ r)
+    cov = rss / (W.shape[0] - W.shape[1]) * np.linalg.inv(A)
+    std = np.sqrt(np.diag(cov))
+    dev = y - y.mean()
+    return replace(ls, values=x, cov=cov, std=std, rel_std_pct=100 * std / np.abs(x),
+                   residual_rms=float(np.sqrt(rss / W.shape[0])), rel_error_pct=100 * np.sqrt(rss / float(y @ y)),
+                   r2=1 - rss / float(dev @ dev))
 
 
 def _hysteretic_motor(W, u_c, d_hat, inner, fs_hz, cutoff_hz, decimate, linear: LSResult, min_gain_pct):

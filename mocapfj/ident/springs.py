@@ -149,15 +149,23 @@ def _nls(resid, x0s, lb, ub, scale, max_nfev=None):
     return best.x
 
 
-def fit_piecewise(delta, tau_s, t=None) -> SpringFit:
+def fit_piecewise(delta, tau_s, t=None, *, support: float = 0.03) -> SpringFit:
     """Three-piece odd spring (PiecewiseSpring) of delta - d0, by nonlinear least squares.
 
     Parameters k1, k2, k3 (N m / rad), tau1 < tau2 (N m), d0 (rad); a few deterministic starts
-    over the breakpoints (fractions of max |tau_s|).
+    over the breakpoints. Each piece must be supported by data (otherwise a piece fitted to a few
+    samples reads an edge effect or a kink as a stiffness): the breakpoints lie between the
+    `support` and 1 - `support` quantiles of |tau_s|, and the middle piece is at least as wide as
+    the narrowest torque band that holds a `support` share of the samples.
     """
     d, y = _check(delta, tau_s)[:2]
     k = fit_linear(d, y).params["k"]
-    tmax = float(np.max(np.abs(y)))
+    srt = np.sort(np.abs(y))
+    m = max(1, int(support * srt.size))
+    lo, hi = srt[m], srt[-m - 1]
+    if not hi > lo:
+        raise InputError(None, "tau_s", "a spring torque that spans a range", f"{srt[0]:.3g} .. {srt[-1]:.3g} N m")
+    w_min = float(np.min(srt[m:] - srt[:-m]))
 
     def spring(x):
         return PiecewiseSpring(k1=x[0], k2=x[1], k3=x[2], tau1=x[3], tau2=x[3] + x[4])
@@ -165,10 +173,11 @@ def fit_piecewise(delta, tau_s, t=None) -> SpringFit:
     def resid(x):
         return spring(x).torque(d - x[5]) - y
 
-    lb = np.array([1e-3 * k] * 3 + [1e-3 * tmax, 1e-3 * tmax, -np.inf])
-    ub = np.array([1e3 * k] * 3 + [tmax, 2 * tmax, np.inf])
-    scale = np.array([k, k, k, tmax, tmax, max(np.std(d), 1e-6)])
-    starts = [np.array([k, k, k, f1 * tmax, (f2 - f1) * tmax, 0.0]) for f1, f2 in ((0.1, 0.4), (0.1, 0.6), (0.2, 0.5), (0.2, 0.8), (0.3, 0.7))]
+    lb = np.array([1e-3 * k] * 3 + [lo, w_min, -np.inf])
+    ub = np.array([1e3 * k] * 3 + [hi - w_min, hi - lo, np.inf])
+    scale = np.array([k, k, k, hi, hi, max(np.std(d), 1e-6)])
+    starts = [np.array([k, k, k, lo + f1 * (hi - lo), max(w_min, (f2 - f1) * (hi - lo)), 0.0])
+              for f1, f2 in ((0.05, 0.3), (0.1, 0.4), (0.1, 0.6), (0.2, 0.5), (0.2, 0.8), (0.3, 0.7))]
     x = _nls(resid, starts, lb, ub, scale)
     el, d0 = spring(x), x[5]
     params = {**el.params, "d0": d0}

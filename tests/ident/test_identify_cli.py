@@ -1,5 +1,5 @@
 """mocapfj identify: three repeated 60 s pa10_joint2 trials through the whole chain (ten are in
-benchmarks/bench_identify.py: mean within 0.6 % of Table I for every parameter, CV 0.01-0.91 %)."""
+benchmarks/bench_identify.py: mean within 0.2 % of Table I for every parameter, CV 0.01-0.91 %)."""
 
 from __future__ import annotations
 
@@ -31,8 +31,8 @@ def three_trials(tmp_path_factory):
 
 
 def test_identify_json_table_and_cv(three_trials, capsys):
-    """Measured (seeds 11-13): mean error I -1.67, mglx -0.01, mgly +0.01, c +0.07, v -1.67,
-    J +0.89, b +1.26, k -0.50 %; CV % 0.79, 0.01, 0.02, 0.01, 0.71, 0.46, 0.51, 0.05."""
+    """Measured (seeds 11-13): mean error I -1.04, mglx -0.00, mgly +0.00, c +0.05, v -1.35,
+    J +0.52, b +1.02, k -0.39 %; CV % 0.81, 0.01, 0.02, 0.01, 0.71, 0.48, 0.52, 0.05."""
     root, paths = three_trials
     assert main(["identify", *map(str, paths), "--out", str(root / "out"), "--json"]) == 0
     s = json.loads(capsys.readouterr().out)

@@ -41,8 +41,8 @@ def identified(request, tmp_path_factory):
 
 
 def test_the_planted_spring_is_selected_and_its_coefficients_recovered(identified):
-    """Measured: cubic k1 +0.2 %, k3 -5.7 %; Bouc-Wen k -0.1 %, alpha 0.702, beta 280, gamma 330
-    (beta + gamma, which sets the loop's saturation, +1.7 %)."""
+    """Measured: cubic k1 +0.2 %, k3 -5.6 %; Bouc-Wen k -0.04 %, alpha 0.702, beta 280, gamma 332
+    (beta + gamma, which sets the loop's saturation, +2.0 %)."""
     name, res, _ = identified
     s = res["spring"]
     assert s["model"] == name
@@ -58,7 +58,7 @@ def test_the_planted_spring_is_selected_and_its_coefficients_recovered(identifie
 
 def test_the_hysteresis_loop_dissipates_the_true_energy(identified):
     """The fitted Bouc-Wen element along the measured deflection dissipates what the true one
-    does along the same path, within 10 % (the seed 000 step-2 route through the link-side spring
+    does along the same path, within 10 % (measured 0.318 J vs 0.329 J; the seed 000 step-2 route through the link-side spring
     torque cannot see the loop at all: the motor's viscous b absorbs it)."""
     name, res, delta = identified
     if name != "bouc_wen":
