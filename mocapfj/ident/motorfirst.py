@@ -26,10 +26,10 @@ is solved on q_hat at `link_cutoff_hz` (20 Hz keeps the Coulomb steps sharp: a l
 distorts the nonlinear columns and biases I). (tau_s, delta_mocap) then feed the spring models of
 `springs` as in seed 000's step 2.
 
-Precision. What limits it is the mocap angle's low-frequency error (the joint calibration's scale
-and zero, different for every marker layout): on pa10_joint2 (60 s, 0.2 mm markers) J and b
-scatter by about 1 % from trial to trial and I, which the data fix through I + J, by about twice
-that (benchmarks/bench_identify.py measures ten trials).
+Precision. What limits it is the mocap angle's noise below 1 Hz (and, with a moving parent
+cluster, its shared and systematic error): on pa10_joint2 (60 s, 0.2 mm markers) J and b scatter
+by about 0.6 % from trial to trial and I, which the data fix through I + J, by about twice that;
+the mean of ten trials is within 0.2 % of the truth (benchmarks/bench_identify.py).
 """
 
 from __future__ import annotations
