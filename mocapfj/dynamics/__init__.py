@@ -23,7 +23,7 @@ Example
 True
 """
 
-from .drivetrain import Drivetrain, GravityBalancer, JointCoupling, TransmissionError, shift_signal
+from .drivetrain import Drivetrain, GravityBalancer, JointCoupling, PositionTorque, TransmissionError, shift_signal
 from .flexjoint import FlexibleJointModel
 from .friction import (AsymmetricCoulombViscous, AsymmetricStribeck, CoulombViscous, ExtendedStribeck, Friction,
                        PositionDependent, Stribeck)
@@ -42,7 +42,7 @@ __all__ = [
     "SpringElement", "LinearSpring", "CubicSpring", "PiecewiseSpring", "Backlash",
     "BoucWen", "Dahl", "MaxwellSlip", "integrate_states",
     # drivetrain
-    "TransmissionError", "GravityBalancer", "JointCoupling", "Drivetrain", "shift_signal",
+    "TransmissionError", "GravityBalancer", "PositionTorque", "JointCoupling", "Drivetrain", "shift_signal",
     # models
     "FlexibleJointModel", "SingleJoint", "NLinkModel",
     # simulation

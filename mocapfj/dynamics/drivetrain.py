@@ -2,6 +2,8 @@
 
 - :class:`TransmissionError`: harmonic-drive kinematic error, periodic in the motor angle.
 - :class:`GravityBalancer`: a spring balancer's torque as a function of the joint angle.
+- :class:`PositionTorque`: any smooth torque of the joint angle (a Fourier series): what a
+  gravity model leaves out, fitted from data when its physical cause is unknown.
 - :class:`JointCoupling`: torques on one joint from the others' accelerations or deflections.
 - :func:`shift_signal`: a sampled signal delayed by a clock offset, with interpolation.
 - :class:`Drivetrain`: the per-joint bundle a model takes (transmission error, balancer and the
@@ -20,7 +22,7 @@ from scipy.interpolate import make_interp_spline
 
 from ..errors import InputError
 
-__all__ = ["TransmissionError", "GravityBalancer", "JointCoupling", "Drivetrain", "shift_signal"]
+__all__ = ["TransmissionError", "GravityBalancer", "PositionTorque", "JointCoupling", "Drivetrain", "shift_signal"]
 
 
 def _tuple(name: str, x) -> tuple[float, ...]:
@@ -156,6 +158,42 @@ class GravityBalancer:
         return -self.k * (L - self.free_length) * self.a * self.b * np.sin(phi) / L
 
 
+@dataclass(frozen=True)
+class PositionTorque:
+    """A torque on the link that depends on the joint angle only, as a Fourier series:
+
+        tau(q) = sum_k c_k cos(n_k q) + s_k sin(n_k q)          (N m, n_k cycles per revolution)
+
+    It enters the link equation on the right like a balancer (``Drivetrain.balancer`` takes it):
+    ``I q'' + G(q) + F = tau_s + tau(q)``. The generic form of a gravity-model error (a balancer,
+    a cable, a wrong mass or centre of mass) when its physical cause is unknown.
+    """
+
+    orders: tuple[float, ...]
+    cos_Nm: tuple[float, ...]
+    sin_Nm: tuple[float, ...]
+
+    def __post_init__(self) -> None:
+        o, c, s = (_tuple(n, getattr(self, n)) for n in ("orders", "cos_Nm", "sin_Nm"))
+        if not (len(o) == len(c) == len(s)):
+            raise InputError(None, "orders, cos_Nm, sin_Nm", "three sequences of equal length", (len(o), len(c), len(s)))
+        object.__setattr__(self, "orders", o)
+        object.__setattr__(self, "cos_Nm", c)
+        object.__setattr__(self, "sin_Nm", s)
+
+    @property
+    def params(self) -> dict:
+        return {"orders": list(self.orders), "cos_Nm": list(self.cos_Nm), "sin_Nm": list(self.sin_Nm)}
+
+    def torque(self, q) -> np.ndarray:
+        """Torque on the link, N m, same shape as `q` (rad)."""
+        q = np.asarray(q, dtype=np.float64)
+        out = np.zeros_like(q)
+        for n, c, s in zip(self.orders, self.cos_Nm, self.sin_Nm):
+            out = out + c * np.cos(n * q) + s * np.sin(n * q)
+        return out
+
+
 @dataclass(frozen=True, eq=False)
 class JointCoupling:
     """Coupling torques between joints: ``tau_c = matrix @ x`` on the link side.
@@ -203,7 +241,7 @@ class Drivetrain:
     Attributes
     ----------
     transmission_error : TransmissionError or None
-    balancer : GravityBalancer or None
+    balancer : GravityBalancer, PositionTorque or None (anything with ``torque(q)``, N m)
     torque_gain : float
         Drive-gain error: the motor produces ``torque_gain * u`` when the controller commands
         (and logs) u. 1 is a correct gain; its residual is proportional to the commanded torque.

@@ -1,0 +1,421 @@
+"""The effect library: for each effect of the discovery vocabulary, its residual signature (the
+regressors it adds to the spring or the link residual), its fit, the model augmentation it
+stands for, where it lives, and what a robotics engineer is told.
+
+Every fitter takes the residual families (:mod:`.residuals`), a boolean mask of the samples to
+fit on, and the other joints' rebuilt accelerations; it returns a :class:`Candidate` whose
+`contribution` (T,) is what the effect adds to its residual (N m, low-passed as the residual),
+or None when the effect does not apply (e.g. coupling without another joint). Parameters that
+enter nonlinearly (Bouc-Wen shape, backlash gap, Stribeck velocity, ripple orders, clock delay)
+are found by variable projection: a grid, then a bounded refinement, the linear ones by least
+squares for each trial value. Names are those of docs/conventions.md and the JSON.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Callable
+
+import numpy as np
+from scipy.optimize import minimize, minimize_scalar
+
+from ..dynamics import (AsymmetricCoulombViscous, Backlash, BoucWen, CoulombViscous, CubicSpring, LinearSpring,
+                        PositionDependent, PositionTorque, Stribeck, TransmissionError, shift_signal)
+from ..ident.conditioning import lowpass
+from ..ident.springs import bouc_wen_states
+from .residuals import LINK_HZ, Families
+
+__all__ = ["EFFECTS", "Candidate", "SPRING_EFFECTS", "LINK_EFFECTS"]
+
+SPRING_EFFECTS = ("hysteresis", "stiffening", "backlash", "transmission_error", "time_delay", "drive_gain")
+LINK_EFFECTS = ("stribeck", "friction_asymmetry", "position_dependent_friction", "coupling", "gravity_mismatch")
+EFFECTS = SPRING_EFFECTS + LINK_EFFECTS
+
+
+@dataclass(frozen=True, eq=False)
+class Candidate:
+    """A fitted effect: `name`, `family` ("spring" or "link"), `params` (JSON-ready), `n_params`,
+    `contribution` (T,) N m, `apply` (JointModel -> augmented JointModel), `location` (dict) and
+    `explain` (callable: gain dict -> one paragraph)."""
+
+    name: str
+    family: str
+    params: dict
+    n_params: int
+    contribution: np.ndarray
+    apply: Callable
+    location: dict
+    explain: Callable = field(repr=False)
+
+
+def _ls(cols: list[np.ndarray], y: np.ndarray, mask: np.ndarray) -> tuple[np.ndarray, float]:
+    A = np.column_stack(cols)
+    c, *_ = np.linalg.lstsq(A[mask], y[mask], rcond=None)
+    r = y[mask] - A[mask] @ c
+    return c, float(r @ r)
+
+
+def _linear_only(fam: Families) -> bool:
+    return isinstance(fam.model.spring, LinearSpring)
+
+
+def _coulomb(fam: Families) -> tuple[float, float] | None:
+    fr = fam.model.friction
+    return (fr.c, fr.v) if isinstance(fr, CoulombViscous) else None
+
+
+# ---------------------------------------------------------------- spring residual
+
+def hysteresis(fam: Families, mask, others) -> Candidate | None:
+    if not _linear_only(fam):
+        return None
+    y, k = fam.r_s, fam.k
+    span = float(np.ptp(fam.d_hat[fam.keep_s]))
+    stride = max(1, int(fam.fs_hz // 100))
+    ds = fam.d_hat[::stride]
+    idx = np.arange(fam.t.size) / stride
+
+    def cols(x):
+        z = np.interp(idx, np.arange(ds.size), bouc_wen_states(ds, 1.0, np.exp(x[0]), np.exp(x[1])))
+        return [fam.lp(fam.d_hat), fam.lp(z), np.ones_like(y)]
+
+    def rss(x):
+        return _ls(cols(x), y, mask)[1]
+
+    grid = [np.log([c / 2, c / 2]) for c in np.geomspace(2.0 / span, 200.0 / span, 7)]
+    x0 = min(grid, key=rss)
+    x = minimize(rss, x0, method="Nelder-Mead", options={"xatol": 0.02, "fatol": 1e-9, "maxfev": 40}).x
+    c, _ = _ls(cols(x), y, mask)
+    d_lin, k_h = c[0], c[1]
+    if not k_h > 0:
+        return None
+    beta, gamma = (float(v) for v in np.exp(x))
+    kt = k + d_lin + k_h
+    alpha = (k + d_lin) / kt
+    contribution = np.column_stack(cols(x)) @ c
+    half_width = 1.0 / (beta + gamma)
+    params = {"k": kt, "alpha": alpha, "beta": beta, "gamma": gamma, "loop_half_height_Nm": k_h * half_width}
+    loc = {"signal": "spring torque vs deflection", "where": "deflection reversals",
+           "loop_half_width_mrad": 1e3 * half_width, "loop_half_height_Nm": k_h * half_width}
+
+    def explain(g):
+        return (f"The spring torque depends on the direction the deflection last moved: at each reversal it "
+                f"lags by a loop of about {1e3 * half_width:.2f} mrad width and {k_h * half_width:.2f} N m "
+                f"half-height ({100 * (1 - alpha):.1f} % of the stiffness acts through a hysteretic state). "
+                f"This is hysteresis in the harmonic drive's flexspline and wave-generator contact, not "
+                f"modelled by the linear spring; a Bouc-Wen spring (k {kt:.4g} N m/rad, alpha {alpha:.3f}) "
+                f"reproduces it.")
+    return Candidate("hysteresis", "spring", params, 5, contribution,
+                     lambda m: m.with_(spring=BoucWen(k=kt, alpha=alpha, beta=beta, gamma=gamma)), loc, explain)
+
+
+def stiffening(fam: Families, mask, others) -> Candidate | None:
+    if not _linear_only(fam):
+        return None
+    y, k = fam.r_s, fam.k
+    cols = [fam.lp(fam.d_hat), fam.lp(fam.d_hat ** 3), np.ones_like(y)]
+    c, _ = _ls(cols, y, mask)
+    k1, k3 = k + c[0], c[1]
+    dmax = float(np.quantile(np.abs(fam.d_hat[fam.keep_s]), 0.98))
+    k_edge = k1 + 3 * k3 * dmax**2
+    contribution = np.column_stack(cols) @ c
+    params = {"k1": k1, "k3": k3, "stiffness_at_max_deflection": k_edge}
+    loc = {"signal": "spring torque vs deflection", "where": "large deflections",
+           "stiffness_small_Nm_per_rad": k1, "stiffness_at_mrad": {f"{1e3 * dmax:.2f}": k_edge}}
+
+    def explain(g):
+        word = "rises" if k3 > 0 else "falls"
+        return (f"The joint's stiffness {word} with the load: {k1:.4g} N m/rad near zero deflection and "
+                f"{k_edge:.4g} N m/rad at {1e3 * dmax:.2f} mrad. Harmonic drives stiffen as more flexspline "
+                f"teeth come into contact (the K1 < K2 < K3 of their datasheets); a cubic spring "
+                f"k1 delta + k3 delta^3 (k3 {k3:.3g} N m/rad^3) replaces the linear one.")
+    return Candidate("stiffening", "spring", params, 2, contribution,
+                     lambda m: m.with_(spring=CubicSpring(k1=k1, k3=k3)), loc, explain)
+
+
+def backlash(fam: Families, mask, others) -> Candidate | None:
+    if not _linear_only(fam):
+        return None
+    y, k = fam.r_s, fam.k
+    d = fam.d_hat
+
+    def cols(gap):
+        dz = np.sign(d) * np.maximum(np.abs(d) - gap / 2, 0.0)
+        return [fam.lp(dz - d), fam.lp(d), np.ones_like(y)]
+
+    span = float(np.quantile(np.abs(d[fam.keep_s]), 0.9))
+    gaps = np.geomspace(1e-3 * span, span, 12)
+    g0 = min(gaps, key=lambda g: _ls(cols(g), y, mask)[1])
+    gap = float(minimize_scalar(lambda g: _ls(cols(g), y, mask)[1], bounds=(g0 / 2, min(2 * g0, 2 * span)),
+                                method="bounded", options={"xatol": 1e-7}).x)
+    c, _ = _ls(cols(gap), y, mask)
+    k_dz = k + c[1]        # the spring behind the dead zone: k_b dz(d) = k_b (dz - d) + k_b d
+    contribution = np.column_stack(cols(gap)) @ c
+    if not (c[0] > 0 and k_dz > 0):
+        return None
+    k_b = float(c[0])
+    params = {"gap_rad": gap, "k": k_b}
+    loc = {"signal": "spring torque vs deflection", "where": "torque reversals", "dead_zone_mrad": 1e3 * gap}
+
+    def explain(g):
+        return (f"Around each torque reversal the deflection crosses a zone of about {1e3 * gap:.2f} mrad "
+                f"(total) where the spring carries almost no torque: lost motion (backlash) in the "
+                f"transmission, between the wave generator, flexspline and circular spline or in a "
+                f"coupling. A dead zone in front of the spring (stiffness {k_b:.4g} N m/rad) models it.")
+    return Candidate("backlash", "spring", params, 2, contribution,
+                     lambda m: m.with_(spring=Backlash(gap, LinearSpring(k_b))), loc, explain)
+
+
+def transmission_error(fam: Families, mask, others) -> Candidate | None:
+    m = fam.model
+    N = m.gear_ratio
+    if not N > 1:
+        return None
+    theta = N * fam.q_m
+    k = fam.k
+    tau = fam.tau_s
+    cols = []
+    for h in (1.0, 2.0):
+        s, c = np.sin(h * theta), np.cos(h * theta)
+        # delta' = delta + e; motor feels tau (1 + e'): r_s ~ k e + tau e'
+        cols += [fam.lp(k * s + tau * N * h * c), fam.lp(k * c - tau * N * h * s)]
+    cols.append(np.ones_like(tau))
+    coef, _ = _ls(cols, fam.r_s, mask)
+    a = coef[:4].reshape(2, 2)
+    amps = [float(np.hypot(*ab)) for ab in a]
+    phases = [float(np.arctan2(ab[1], ab[0])) for ab in a]    # a sin + b cos = A sin(x + phi)
+    contribution = np.column_stack(cols) @ coef
+    te = TransmissionError(N, tuple(amps), tuple(phases), (1.0, 2.0))
+    if m.transmission_error is not None:
+        return None
+    params = {"amplitudes_rad": amps, "phases_rad": phases, "orders": [1.0, 2.0], "gear_ratio": N}
+    loc = {"signal": "spring torque", "where": "periodic in the motor angle (wave-generator angle N q_m)",
+           "orders_per_wave_generator_turn": [1, 2], "amplitudes_urad": [1e6 * x for x in amps]}
+
+    def explain(g):
+        return (f"The residual repeats with the wave-generator angle (N q_m, N = {N:g}), once and twice per "
+                f"turn, not with time or the link angle: the harmonic drive's kinematic transmission error. "
+                f"The flexspline output runs ahead of and behind q_m by {1e6 * amps[0]:.0f} and "
+                f"{1e6 * amps[1]:.0f} urad at those orders (tooth and bearing geometry, wave-generator "
+                f"ellipse), which the spring sees as deflection and the motor as a torque ripple.")
+    return Candidate("transmission_error", "spring", params, 4, contribution,
+                     lambda mm: mm.with_(transmission_error=te), loc, explain)
+
+
+def time_delay(fam: Families, mask, others) -> Candidate | None:
+    t, q = fam.t, fam.q
+    base = fam.r_s
+
+    def resid(d):
+        qs = shift_signal(t, q, d)
+        ok = np.isfinite(qs)
+        qs = np.interp(t, t[ok], qs[ok])
+        delta = fam.q_m - lowpass(qs, fam.fs_hz, LINK_HZ)        # as families() forms it, on the new clock
+        if fam.model.transmission_error is not None:
+            delta = delta + fam.model.transmission_error.error(fam.q_m)
+        return fam.spring_residual_for(delta)
+
+    def cost(d):
+        r = resid(d)
+        c, rss = _ls([np.ones_like(r)], r, mask)
+        return rss
+
+    grid = np.linspace(-0.01, 0.01, 41)
+    d0 = min(grid, key=cost)
+    d = float(minimize_scalar(cost, bounds=(d0 - 5e-4, d0 + 5e-4), method="bounded", options={"xatol": 1e-6}).x)
+    r = resid(d)
+    c, _ = _ls([np.ones_like(r)], r, mask)
+    contribution = base - (r - c[0])
+    params = {"delay_s": d}
+    loc = {"signal": "spring torque vs deflection", "where": "cross-correlation of the residual with the link velocity",
+           "lag_ms": 1e3 * d}
+
+    def explain(g):
+        late = "late" if d > 0 else "early"
+        return (f"The deflection residual follows the link velocity, as a clock offset does: the mocap samples "
+                f"are {1e3 * abs(d):.2f} ms {late} on the controller clock beyond the declared offset. Camera "
+                f"exposure and processing latency, or a trigger offset between the mocap system and the "
+                f"controller, give this; the deflection then carries q' x delay of spurious motion. Shifting the "
+                f"link angle by {1e3 * d:.2f} ms removes it.")
+    return Candidate("time_delay", "spring", params, 1, contribution,
+                     lambda m: m.with_(delay_s=m.delay_s + d), loc, explain)
+
+
+def drive_gain(fam: Families, mask, others) -> Candidate | None:
+    cols = [fam.lp(fam.u), np.ones_like(fam.u)]
+    c, _ = _ls(cols, fam.r_s, mask)
+    g = float(fam.model.torque_gain - c[0])      # true tau_s = g u - ...: r_s = (g_model - g) u
+    contribution = np.column_stack(cols) @ c
+    params = {"gain": g}
+    loc = {"signal": "spring torque", "where": "proportional to the commanded torque", "slope": float(c[0])}
+
+    def explain(gg):
+        return (f"The residual is proportional to the commanded motor torque: the drive delivers {g:.4f} times the "
+                f"torque the controller logs ({100 * (g - 1):+.2f} %). A torque-constant or current-sensor "
+                f"calibration error (or a gear ratio off by that factor) does this; scale the logged torque.")
+    return Candidate("drive_gain", "spring", params, 1, contribution,
+                     lambda m: m.with_(torque_gain=g), loc, explain)
+
+
+# ---------------------------------------------------------------- link residual
+
+def stribeck(fam: Families, mask, others) -> Candidate | None:
+    cv = _coulomb(fam)
+    if cv is None:
+        return None
+    qd = fam.qd_hat
+    y = fam.r_l
+
+    def cols(vs):
+        return [fam.lp(np.exp(-(qd / vs) ** 2) * np.sign(qd)), np.ones_like(y)]
+
+    # a Stribeck velocity well above the speeds left out of the link residual (0.005 rad/s),
+    # where smooth pre-sliding friction, not the Stribeck drop, shapes the torque
+    vmin = 0.01
+    vss = np.geomspace(vmin, 0.3, 15)
+    v0 = min(vss, key=lambda v: _ls(cols(v), y, mask)[1])
+    vs = float(np.exp(minimize_scalar(lambda lv: _ls(cols(np.exp(lv)), y, mask)[1],
+                                      bounds=(np.log(max(vmin, v0 / 1.5)), np.log(v0 * 1.5)), method="bounded").x))
+    c, _ = _ls(cols(vs), y, mask)
+    # r_l = tau_s - (I q'' + G + F_nominal) = (fs - fc) e^.. sign  with the true friction F = F_nominal + that
+    peak = -float(c[0])
+    if not peak > 0:
+        return None
+    fc, fv = cv
+    contribution = np.column_stack(cols(vs)) @ c
+    params = {"fs": fc + peak, "fc": fc, "vs": vs, "fv": fv}
+    loc = {"signal": "link torque", "where": f"low speed, |q'| < {3 * vs:.3g} rad/s, both signs",
+           "velocity_rad_s": vs, "excess_Nm": peak}
+
+    def explain(g):
+        return (f"At low speed (|q'| below about {3 * vs:.3g} rad/s, on both signs) the joint needs "
+                f"{peak:.2f} N m more than Coulomb plus viscous friction predict, falling off over a Stribeck "
+                f"velocity of {vs:.3g} rad/s: the breakaway friction of the lubricated gear and bearing "
+                f"contacts (static {fc + peak:.2f} N m vs sliding {fc:.2f} N m, seed 001 eq. 7).")
+    return Candidate("stribeck", "link", params, 2, contribution,
+                     lambda m: m.with_(friction=Stribeck(fc=fc, fs=fc + peak, vs=vs, fv=fv)), loc, explain)
+
+
+def friction_asymmetry(fam: Families, mask, others) -> Candidate | None:
+    cv = _coulomb(fam)
+    if cv is None:
+        return None
+    qd = fam.qd_hat
+    cols = [fam.lp(np.abs(np.sign(qd))), fam.lp(np.abs(qd))]
+    c, _ = _ls(cols, fam.r_l, mask)
+    dc, dv = -float(c[0]), -float(c[1])          # r_l = -(dc + dv |q'|)
+    fc, fv = cv
+    contribution = np.column_stack(cols) @ c
+    el = AsymmetricCoulombViscous(c_pos=fc + dc, c_neg=fc - dc, v_pos=fv + dv, v_neg=fv - dv)
+    params = {"c_pos": fc + dc, "c_neg": fc - dc, "v_pos": fv + dv, "v_neg": fv - dv}
+    loc = {"signal": "link torque", "where": "sign of the velocity",
+           "mean_difference_Nm": 2 * dc, "viscous_difference_Nm_s": 2 * dv}
+
+    def explain(g):
+        return (f"The friction differs with the direction of motion: Coulomb {fc + dc:.2f} N m and viscous "
+                f"{fv + dv:.2f} N m s for q' > 0 against {fc - dc:.2f} N m and {fv - dv:.2f} N m s for q' < 0. "
+                f"Seal preload, the helix of the gearing and lubricant distribution make joint friction "
+                f"direction-dependent (seed 001 Table I, seed 002 Table II).")
+    return Candidate("friction_asymmetry", "link", params, 2, contribution,
+                     lambda m: m.with_(friction=el), loc, explain)
+
+
+def position_dependent_friction(fam: Families, mask, others) -> Candidate | None:
+    if _coulomb(fam) is None and not hasattr(fam.model.friction, "with_smoothing"):
+        return None
+    q, s = fam.q_hat, np.sign(fam.qd_hat)
+    y = fam.r_l
+    orders = np.arange(2, 41, dtype=float)
+
+    def cols(ns):
+        out = []
+        for n in ns:
+            out += [fam.lp(s * np.cos(n * q)), fam.lp(s * np.sin(n * q))]
+        return out + [np.ones_like(y)]
+
+    chosen: list[float] = []
+    for _ in range(2):
+        best = min((n for n in orders if n not in chosen), key=lambda n: _ls(cols(chosen + [n]), y, mask)[1])
+        chosen.append(float(best))
+    c, _ = _ls(cols(chosen), y, mask)
+    amps, phases = [], []
+    for i in range(len(chosen)):
+        a, b = -c[2 * i], -c[2 * i + 1]           # F gains s (a cos + b sin) = s A cos(n q + phi)
+        amps.append(float(np.hypot(a, b)))
+        phases.append(float(np.arctan2(-b, a)))
+    contribution = np.column_stack(cols(chosen)) @ c
+    params = {"orders": chosen, "amplitudes_Nm": amps, "phases_rad": phases}
+    loc = {"signal": "link torque", "where": "periodic in the joint angle",
+           "orders_per_revolution": chosen, "amplitudes_Nm": amps}
+
+    def explain(g):
+        parts = ", ".join(f"{a:.2f} N m at {n:g} cycles per revolution" for n, a in zip(chosen, amps))
+        return (f"The friction level changes with the joint angle, repeating {parts}: the Coulomb friction "
+                f"ripples with position, as the harmonic drive's manufacturing and assembly errors (eccentricity, "
+                f"misalignment of wave generator and flexspline) load its teeth and bearings unevenly over a turn "
+                f"(seed 000 sec. VI).")
+    return Candidate("position_dependent_friction", "link", params, 2 * len(chosen) + len(chosen), contribution,
+                     lambda m: m.with_(friction=PositionDependent(m.friction, orders=tuple(chosen),
+                                                                  amplitudes=tuple(amps), phases=tuple(phases))),
+                     loc, explain)
+
+
+def coupling(fam: Families, mask, others) -> Candidate | None:
+    srcs = [s for s in (others or {}) if s != fam.model.name and s not in fam.model.coupling]
+    if not srcs:
+        return None
+    cols = [fam.lp(others[s]) for s in srcs] + [np.ones_like(fam.r_l)]
+    c, _ = _ls(cols, fam.r_l, mask)
+    # the true link equation holds ... + inertia q_s'' = tau_s, so r_l = inertia q_s''
+    inertia = {s: float(v) for s, v in zip(srcs, c[:-1])}
+    contribution = np.column_stack(cols) @ c
+    params = {"inertia_kgm2": inertia}
+    corr = {s: float(np.corrcoef(fam.r_l[mask], others[s][mask])[0, 1]) for s in srcs}
+    loc = {"signal": "link torque", "where": "correlated with the neighbours' accelerations", "correlation": corr}
+
+    def explain(g):
+        parts = ", ".join(f"{s} ({v:+.3g} kg m^2, r = {corr[s]:+.2f})" for s, v in inertia.items())
+        return (f"The residual follows the acceleration of {parts}: the other joint's motion reaches this one "
+                f"through the link inertia it carries (an off-diagonal mass-matrix term a single-joint model "
+                f"leaves out), the torque -inertia x q''. Identify the joints together (a URDF), or add the term.")
+    return Candidate("coupling", "link", params, len(srcs), contribution,
+                     lambda m: m.with_(coupling={**m.coupling, **inertia}), loc, explain)
+
+
+def gravity_mismatch(fam: Families, mask, others) -> Candidate | None:
+    q = fam.q_hat
+    orders = (1.0, 2.0, 3.0)
+    cols = []
+    for n in orders:
+        cols += [fam.lp(np.cos(n * q)), fam.lp(np.sin(n * q))]
+    c, _ = _ls(cols, fam.r_l, mask)
+    # r_l = tau_s - (... - tau_pos(q)): the missing tau_pos = -(fitted)
+    cos_, sin_ = [-float(x) for x in c[0::2]], [-float(x) for x in c[1::2]]
+    pt_new = PositionTorque(orders, cos_, sin_)
+    contribution = np.column_stack(cols) @ c
+    qs = np.linspace(float(np.min(q[fam.keep_l])), float(np.max(q[fam.keep_l])), 5)
+    params = {"orders": list(orders), "cos_Nm": cos_, "sin_Nm": sin_}
+    loc = {"signal": "link torque", "where": "function of the joint angle only",
+           "torque_Nm_at_q_rad": {f"{a:.3f}": float(pt_new.torque(a)) for a in qs}}
+
+    def explain(g):
+        tq = pt_new.torque(qs)
+        return (f"A smooth torque that depends on the joint angle alone, from {tq.min():+.2f} to {tq.max():+.2f} N m "
+                f"over q = {qs[0]:.2f} .. {qs[-1]:.2f} rad, is missing from the gravity model: a gravity "
+                f"balancer, cable or hose forces, or a mass or centre of mass off in the model. It is not of the "
+                f"m g l sin q form alone, so fix the gravity model (or add a balancer) rather than the friction.")
+
+    def apply(m):
+        old = m.position_torque
+        if old is None:
+            return m.with_(position_torque=pt_new)
+        return m.with_(position_torque=PositionTorque(old.orders + orders, old.cos_Nm + tuple(cos_),
+                                                      old.sin_Nm + tuple(sin_)))
+    return Candidate("gravity_mismatch", "link", params, 6, contribution, apply, loc, explain)
+
+
+FITTERS = {"hysteresis": hysteresis, "stiffening": stiffening, "backlash": backlash,
+           "transmission_error": transmission_error, "time_delay": time_delay, "drive_gain": drive_gain,
+           "stribeck": stribeck, "friction_asymmetry": friction_asymmetry,
+           "position_dependent_friction": position_dependent_friction, "coupling": coupling,
+           "gravity_mismatch": gravity_mismatch}

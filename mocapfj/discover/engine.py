@@ -1,0 +1,311 @@
+"""Discovery: compare a model with a recording, locate the mismatch, name the physics, model it and
+show the fit improve (issue "mismatch discovery"; docs/discovery.md).
+
+1. Compare: the model's output-error simulation on the recording's own motor motion
+   (:func:`.model.simulate_joint`): deflection and torque residuals and fit % per joint.
+2. Locate: statistics of the equation-error residuals (:mod:`.residuals`): which joint and which
+   residual (spring or link), time windows, state regions, frequency bands, whiteness and the
+   cross-correlation with the inputs at each lag, each with its strength and significance.
+3. Name and model: every effect of the library (:mod:`.effects`) is fitted on the first part of
+   the trial and scored on the held-out rest: the torque it explains there, sqrt(RSS_before -
+   RSS_after) / sqrt(n), and an F test with the residual's effective sample count (its
+   autocorrelation counted), Bonferroni-corrected over the effects tried. The strongest
+   significant effect is added to the model, the residuals recomputed, and the search repeated
+   until nothing significant is left (or the residual is white); the chosen effects are refitted
+   on the whole trial.
+4. Prove: the augmented model's output-error fit against the nominal one, on the trial and on a
+   validation recording.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy import stats
+
+from ..errors import InputError
+from ..ident.conditioning import derivatives, lowpass
+from .effects import EFFECTS, FITTERS, SPRING_EFFECTS, Candidate
+from .model import simulate_joint
+from .residuals import Families, families
+
+__all__ = ["JointSignals", "Discovery", "discover", "locate", "effective_n"]
+
+
+@dataclass(frozen=True, eq=False)
+class JointSignals:
+    """One joint's recorded signals on one clock (the mocap samples): t s, q rad (mocap link
+    angle), q_m rad (motor angle / N), u N m (logged torque x N)."""
+
+    t: np.ndarray
+    q: np.ndarray
+    q_m: np.ndarray
+    u: np.ndarray
+
+
+@dataclass(frozen=True, eq=False)
+class Discovery:
+    """What :func:`discover` found: `effects` (list of dicts, most important first), `models`
+    (joint -> augmented JointModel), `nominal` (joint -> JointModel), `fit_before`, `fit_after`
+    (joint -> fit %), `fits` (joint -> {before, after} details), `location` (joint -> residual
+    statistics), `validation` (same keys on the validation recording, or None), `residuals`
+    (joint -> {t, before/after deflection and torque residuals} for the report)."""
+
+    effects: list
+    models: dict
+    nominal: dict
+    fit_before: dict
+    fit_after: dict
+    fits: dict
+    location: dict
+    validation: dict | None
+    residuals: dict = field(default_factory=dict)
+
+
+def effective_n(r: np.ndarray) -> float:
+    """Independent samples in a residual r (n,): n / (1 + 2 sum rho_k) over the lags before the
+    autocorrelation first drops below 0.05 (a filtered residual's samples are not independent)."""
+    r = np.asarray(r, dtype=np.float64)
+    r = r - r.mean()
+    n = r.size
+    f = np.fft.rfft(r, 2 * n)
+    ac = np.fft.irfft(f * np.conj(f))[:n]
+    ac = ac / ac[0] if ac[0] > 0 else ac
+    below = np.flatnonzero(ac < 0.05)
+    m = int(below[0]) if below.size else n
+    return float(n / max(1.0, 1.0 + 2.0 * ac[1:m].sum()))
+
+
+def _ftest(rss0: float, rss1: float, p: int, n_eff: float) -> float:
+    """p-value of the held-out F test: does the effect lower the residual more than chance?"""
+    dof = max(n_eff - p, 1.0)
+    if rss1 <= 0 or rss0 <= rss1:
+        return 1.0
+    F = ((rss0 - rss1) / p) / (rss1 / dof)
+    return float(stats.f.sf(F, p, dof))
+
+
+def _ljung_box(r: np.ndarray, fs_hz: float, lags: int = 20) -> float:
+    """p-value that r is white, at the residual's own bandwidth (decimated to 2 x 10 Hz)."""
+    step = max(1, int(fs_hz // 20))
+    x = r[::step] - r[::step].mean()
+    n = x.size
+    ac = np.array([np.dot(x[:-k], x[k:]) for k in range(1, lags + 1)]) / np.dot(x, x)
+    Q = n * (n + 2) * np.sum(ac**2 / (n - np.arange(1, lags + 1)))
+    return float(stats.chi2.sf(Q, lags))
+
+
+def locate(fam: Families) -> dict:
+    """Where the residuals are, with statistics: per residual (spring, link) its RMS, whiteness,
+    the worst 2 s windows, the state regions where its mean differs from zero (t test), its
+    frequency bands and its cross-correlation with the motor velocity and torque at each lag."""
+    out = {}
+    dt = 1.0 / fam.fs_hz
+    for name, r_all, keep in (("spring", fam.r_s, fam.keep_s), ("link", fam.r_l, fam.keep_l)):
+        r = np.where(keep, r_all, np.nan)
+        rr = r[keep]
+        rms = float(np.sqrt(np.mean(rr**2)))
+        n_eff = effective_n(rr)
+        # time windows: RMS per 2 s, the three worst against the median
+        w = int(2.0 * fam.fs_hz)
+        nw = fam.t.size // w
+        win = np.sqrt(np.nanmean(r[: nw * w].reshape(nw, w) ** 2, axis=1))
+        order = np.argsort(win)[::-1][:3]
+        windows = [{"t_start_s": float(fam.t[i * w]), "t_end_s": float(fam.t[min((i + 1) * w, fam.t.size - 1)]),
+                    "rms_Nm": float(win[i]), "ratio_to_median": float(win[i] / np.nanmedian(win))} for i in order]
+        # state regions: mean residual and its t statistic (effective n) in each region
+        qd, q = fam.qd_hat, fam.q_hat
+        tau = fam.tau_s
+        rev = np.zeros_like(qd, bool)
+        flips = np.flatnonzero(np.diff(np.sign(qd)) != 0)
+        for i in flips:
+            rev[max(0, i - int(0.1 * fam.fs_hz)): i + int(0.1 * fam.fs_hz)] = True
+        vq = np.quantile(np.abs(qd[keep]), 0.2)
+        regions = {"velocity_reversals": rev, f"low_speed_below_{vq:.3g}_rad_s": np.abs(qd) < vq,
+                   "positive_velocity": qd > 0, "negative_velocity": qd < 0,
+                   "high_torque": np.abs(tau) > np.quantile(np.abs(tau[keep]), 0.8),
+                   "positive_deflection": fam.delta > 0, "negative_deflection": fam.delta < 0}
+        reg = {}
+        for rn, m in regions.items():
+            m = m & keep
+            if m.sum() < 50:
+                continue
+            x = r_all[m]
+            ne = max(2.0, n_eff * m.sum() / keep.sum())
+            tstat = float(x.mean() / (x.std() / np.sqrt(ne))) if x.std() > 0 else 0.0
+            reg[rn] = {"mean_Nm": float(x.mean()), "rms_Nm": float(np.sqrt(np.mean(x**2))),
+                       "p_value": float(2 * stats.t.sf(abs(tstat), ne - 1))}
+        # periodicity in the motor (wave-generator) angle and in the joint angle: strongest order
+        per = {}
+        for pn, ang, ords in (("wave_generator_angle", fam.model.gear_ratio * fam.q_m, np.arange(1, 5)),
+                              ("joint_angle", q, np.arange(1, 41))):
+            best = None
+            for n in ords:
+                A = np.column_stack([np.cos(n * ang[keep]), np.sin(n * ang[keep]), np.ones(keep.sum())])
+                c, *_ = np.linalg.lstsq(A, rr, rcond=None)
+                amp = float(np.hypot(c[0], c[1]))
+                if best is None or amp > best[1]:
+                    best = (float(n), amp)
+            per[pn] = {"order": best[0], "amplitude_Nm": best[1]}
+        # frequency bands: residual power per band
+        f = np.fft.rfftfreq(rr.size, dt)
+        P = np.abs(np.fft.rfft(rr - rr.mean())) ** 2
+        bands = {}
+        for lo, hi in ((0.0, 0.5), (0.5, 2.0), (2.0, 5.0), (5.0, 10.0)):
+            m = (f >= lo) & (f < hi)
+            bands[f"{lo:g}-{hi:g}_Hz"] = float(P[m].sum() / P.sum()) if P.sum() > 0 else 0.0
+        # cross-correlation with the inputs: motor velocity and torque
+        qmd = derivatives(fam.q_m, fam.fs_hz)[0]
+        xc = {}
+        for inp_name, x in (("motor_velocity", qmd), ("motor_torque", fam.u)):
+            xk = x[keep] - x[keep].mean()
+            lags = np.arange(-int(0.05 * fam.fs_hz), int(0.05 * fam.fs_hz) + 1)
+            rho = np.array([np.corrcoef(np.roll(xk, L)[60:-60], rr[60:-60])[0, 1] for L in lags])
+            i = int(np.argmax(np.abs(rho)))
+            z = abs(rho[i]) * np.sqrt(max(n_eff - 3, 1))
+            xc[inp_name] = {"peak_correlation": float(rho[i]), "lag_ms": float(1e3 * lags[i] * dt),
+                            "p_value": float(min(1.0, lags.size * 2 * stats.norm.sf(z)))}
+        out[name] = {"rms_Nm": rms, "n_effective": n_eff, "whiteness_p_value": _ljung_box(rr, fam.fs_hz),
+                     "worst_windows": windows, "regions": reg, "periodicity": per, "bands_power_fraction": bands,
+                     "cross_correlation": xc}
+    return out
+
+
+def _residual_of(fam: Families, family: str) -> tuple[np.ndarray, np.ndarray]:
+    return (fam.r_s, fam.keep_s) if family == "spring" else (fam.r_l, fam.keep_l)
+
+
+def _score(cand: Candidate, fam: Families, test: np.ndarray) -> dict:
+    r, keep = _residual_of(fam, cand.family)
+    m = keep & test
+    r0 = r[m] - r[m].mean()
+    r1 = (r - cand.contribution)[m]
+    r1 = r1 - r1.mean()
+    rss0, rss1 = float(r0 @ r0), float(r1 @ r1)
+    n = int(m.sum())
+    n_eff = effective_n(r1)
+    return {"explained_Nm": float(np.sqrt(max(rss0 - rss1, 0.0) / n)), "rms_before_Nm": float(np.sqrt(rss0 / n)),
+            "rms_after_Nm": float(np.sqrt(rss1 / n)), "p_value": _ftest(rss0, rss1, cand.n_params, n_eff),
+            "n_effective": n_eff}
+
+
+def _families_all(models, signals, fs_hz):
+    """Residual families of every joint (the coupling terms need the others' accelerations)."""
+    fams = {}
+    for name, m in models.items():
+        s = signals[name]
+        fams[name] = families(m.with_(coupling={}), s.t, s.q, s.q_m, s.u, fs_hz=fs_hz)
+    qdd = {name: f.qdd_hat for name, f in fams.items()}
+    for name, m in models.items():
+        if m.coupling:
+            s = signals[name]
+            fams[name] = families(m, s.t, s.q, s.q_m, s.u, fs_hz=fs_hz, others_qdd=qdd)
+    return fams, qdd
+
+
+def _search(fams, qdd, names, tried, holdout):
+    """Fit every effect on every joint on the first part of the trial, score it on the rest."""
+    results = []
+    for jn in names:
+        fam = fams[jn]
+        T = fam.t.size
+        train = np.zeros(T, bool)
+        train[: int(T * (1 - holdout))] = True
+        for eff in tried:
+            family = "spring" if eff in SPRING_EFFECTS else "link"
+            cand = FITTERS[eff](fam, train & _residual_of(fam, family)[1], {k: v for k, v in qdd.items() if k != jn})
+            if cand is None:
+                continue
+            results.append((jn, cand, _score(cand, fam, ~train)))
+    return results
+
+
+def discover(signals: dict, models: dict, *, fs_hz: float, validation: dict | None = None, holdout: float = 0.3,
+             alpha: float = 1e-3, min_explained_Nm: float = 0.05, max_effects: int = 3,
+             effects=EFFECTS, simulate: bool = True) -> Discovery:
+    """Discover what `models` miss in the recording `signals` (joint -> JointSignals).
+
+    alpha : significance after the Bonferroni correction over the effects and joints tried.
+    min_explained_Nm : an effect must explain at least this torque RMS on the held-out part.
+    simulate : run the output-error simulations (fit before / after); False for the search alone.
+    """
+    unknown = [e for e in effects if e not in FITTERS]
+    if unknown:
+        raise InputError(None, "effects", f"names from {list(EFFECTS)}", unknown)
+    missing = [n for n in signals if n not in models]
+    if missing:
+        raise InputError(None, "model", f"a model for every joint of the recording {list(signals)}", f"none for {missing}")
+    nominal = {n: models[n] for n in signals}
+    current = dict(nominal)
+    names = list(signals)
+    fams, qdd = _families_all(current, signals, fs_hz)
+    location = {n: locate(fams[n]) for n in names}
+    found = []
+    for _ in range(max_effects):
+        tried = [e for e in effects if not any(f["name"] == e for f in found)]
+        results = _search(fams, qdd, names, tried, holdout)
+        if not results:
+            break
+        n_tests = len(results)
+        sig = [(jn, c, s) for jn, c, s in results if s["p_value"] * n_tests < alpha and s["explained_Nm"] >= min_explained_Nm]
+        if not sig:
+            break
+        jn, cand, score = max(sig, key=lambda x: x[2]["explained_Nm"])
+        # refit on the whole trial, augment, recompute the residuals
+        fam = fams[jn]
+        full = FITTERS[cand.name](fam, _residual_of(fam, cand.family)[1], {k: v for k, v in qdd.items() if k != jn})
+        cand = full if full is not None else cand
+        current[jn] = cand.apply(current[jn])
+        found.append({"name": cand.name, "joint": jn, "candidate": cand, "score": score,
+                      "p_value": min(1.0, score["p_value"] * n_tests),
+                      "runner_up": sorted(((c.name, s["explained_Nm"]) for j, c, s in results if j == jn and c.name != cand.name),
+                                          key=lambda x: -x[1])[:3]})
+        fams, qdd = _families_all(current, signals, fs_hz)
+    effects_out, fit_before, fit_after, fits, residuals = [], {}, {}, {}, {}
+    val = None
+    if simulate:
+        for jn in names:
+            s = signals[jn]
+            others = {k: v for k, v in qdd.items() if k != jn}
+            before = simulate_joint(nominal[jn], s.t, s.q, s.q_m, s.u, others)
+            fit_before[jn] = before.fit
+            steps = [before]
+            model = nominal[jn]
+            for f in found:
+                if f["joint"] == jn:
+                    model = f["candidate"].apply(model)
+                    steps.append(simulate_joint(model, s.t, s.q, s.q_m, s.u, others))
+                    f["fit_gain_pct"] = steps[-1].fit - steps[-2].fit
+            after = steps[-1]
+            fit_after[jn] = after.fit
+            fits[jn] = {"before": {"deflection": before.fit_delta, "torque": before.fit_u, "fit": before.fit},
+                        "after": {"deflection": after.fit_delta, "torque": after.fit_u, "fit": after.fit}}
+            residuals[jn] = {"t": s.t, "r_delta_before": before.r_delta, "r_u_before": before.r_u,
+                             "r_delta_after": after.r_delta, "r_u_after": after.r_u}
+        if validation is not None:
+            val = {"fit_before": {}, "fit_after": {}, "fits": {}}
+            vq = {}
+            for jn in names:
+                if jn in validation:
+                    v = validation[jn]
+                    vq[jn] = lowpass(derivatives(lowpass(v.q_m, fs_hz, 20.0), fs_hz)[1], fs_hz, 20.0)
+            for jn in names:
+                if jn not in validation:
+                    continue
+                v = validation[jn]
+                others = {k: x for k, x in vq.items() if k != jn}
+                b = simulate_joint(nominal[jn], v.t, v.q, v.q_m, v.u, others)
+                a = simulate_joint(current[jn], v.t, v.q, v.q_m, v.u, others)
+                val["fit_before"][jn], val["fit_after"][jn] = b.fit, a.fit
+                val["fits"][jn] = {"before": {"deflection": b.fit_delta, "torque": b.fit_u, "fit": b.fit},
+                                   "after": {"deflection": a.fit_delta, "torque": a.fit_u, "fit": a.fit}}
+    for f in found:
+        c = f["candidate"]
+        effects_out.append({"name": c.name, "joint": f["joint"], "explanation": c.explain(f["score"]),
+                            "location": {**c.location, "residual": c.family,
+                                         "explained_torque_rms_Nm": f["score"]["explained_Nm"]},
+                            "parameters": c.params, "p_value": f["p_value"],
+                            "fit_gain_pct": f.get("fit_gain_pct"), "runner_up": f["runner_up"]})
+    return Discovery(effects=effects_out, models=current, nominal=nominal, fit_before=fit_before, fit_after=fit_after,
+                     fits=fits, location=location, validation=val, residuals=residuals)
