@@ -22,7 +22,6 @@ PLANNED = [
     ("calibrate-rig", "calibrate a multi-camera rig (board or wand)"),
     ("triangulate", "2D detections to labelled 3D marker trajectories"),
     ("frf", "multisine frequency response estimation"),
-    ("discover", "locate, name and model what the simulation misses"),
     ("run", "the whole chain on a recording"),
     ("report", "a readable report of a run"),
     ("view", "open a run in rerun"),
@@ -154,6 +153,29 @@ def _cmd_identify(args) -> int:
     return 0
 
 
+def _cmd_discover(args) -> int:
+    from .pipeline import run_discover
+
+    s = run_discover(args.recording, args.out, model=args.model, validation=args.validation)
+
+    def human(s):
+        lines = [f"discover {s['recording']} against {s['model']}: {s['verdict']}"]
+        for e in s["effects"]:
+            lines.append(f"  {e['name']} on {e['joint']} (p = {e['p_value']:.1e}, fit {e['fit_gain_pct']:+.2f} %): "
+                         f"{e['explanation']}")
+        for j in s["fit_before"]:
+            line = f"  {j}: fit {s['fit_before'][j]:.2f} % -> {s['fit_after'][j]:.2f} %"
+            if s["validation"] and j in s["validation"]["fit_before"]:
+                v = s["validation"]
+                line += f"; validation {v['fit_before'][j]:.2f} % -> {v['fit_after'][j]:.2f} %"
+            lines.append(line)
+        lines.append(f"  wrote {args.out}/discovery.json, model.toml, residuals.csv")
+        return "\n".join(lines)
+
+    _emit(args, s, human)
+    return 0
+
+
 def _cmd_inspect(args) -> int:
     from .pipeline import inspect_path
 
@@ -213,6 +235,15 @@ def build_parser() -> argparse.ArgumentParser:
     idf.add_argument("--decimate", type=int, default=2, help="parallel decimation factor")
     idf.add_argument("--json", action="store_true", help="print a JSON summary on stdout")
     idf.set_defaults(func=_cmd_identify)
+
+    dc = sub.add_parser("discover", help="locate, name and model what the model misses in a recording")
+    dc.add_argument("recording", help="recording bundle directory or recording.toml")
+    dc.add_argument("--out", required=True, help="output directory")
+    dc.add_argument("--model", default=None,
+                    help="model file (or scenario file) to compare with; default: identified on the spot")
+    dc.add_argument("--validation", default=None, help="a second recording on which to prove the fit improves")
+    dc.add_argument("--json", action="store_true", help="print a JSON summary on stdout")
+    dc.set_defaults(func=_cmd_discover)
 
     i = sub.add_parser("inspect", help="check and summarise a recording bundle or a C3D/TRC file")
     i.add_argument("recording", help="bundle directory, recording.toml, or marker file")

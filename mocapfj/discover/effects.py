@@ -19,7 +19,7 @@ from typing import Callable
 import numpy as np
 from scipy.optimize import minimize, minimize_scalar
 
-from ..dynamics import (AsymmetricCoulombViscous, Backlash, BoucWen, CoulombViscous, CubicSpring, LinearSpring,
+from ..dynamics import (AsymmetricCoulombViscous, Backlash, BoucWen, CoulombViscous, LinearSpring,
                         PositionDependent, PositionTorque, Stribeck, TransmissionError, shift_signal)
 from ..ident.conditioning import lowpass
 from ..ident.springs import bouc_wen_states
@@ -82,9 +82,9 @@ def hysteresis(fam: Families, mask, others) -> Candidate | None:
     def rss(x):
         return _ls(cols(x), y, mask)[1]
 
-    grid = [np.log([c / 2, c / 2]) for c in np.geomspace(2.0 / span, 200.0 / span, 7)]
+    grid = [np.log([c * f, c * (1 - f)]) for c in np.geomspace(2.0 / span, 200.0 / span, 7) for f in (0.2, 0.5, 0.8)]
     x0 = min(grid, key=rss)
-    x = minimize(rss, x0, method="Nelder-Mead", options={"xatol": 0.02, "fatol": 1e-9, "maxfev": 40}).x
+    x = minimize(rss, x0, method="Nelder-Mead", options={"xatol": 0.01, "fatol": 1e-9, "maxfev": 80}).x
     c, _ = _ls(cols(x), y, mask)
     d_lin, k_h = c[0], c[1]
     if not k_h > 0:
@@ -109,51 +109,79 @@ def hysteresis(fam: Families, mask, others) -> Candidate | None:
                      lambda m: m.with_(spring=BoucWen(k=kt, alpha=alpha, beta=beta, gamma=gamma)), loc, explain)
 
 
+def _three_slopes(d: np.ndarray, d1: float, d2: float) -> list[np.ndarray]:
+    """Basis of an odd, continuous three-slope spring in delta: K1 on |delta| < d1, K2 to d2, K3 beyond."""
+    a = np.abs(d)
+    sg = np.sign(d)
+    return [np.clip(d, -d1, d1), sg * np.clip(a - d1, 0.0, d2 - d1), sg * np.maximum(a - d2, 0.0)]
+
+
 def stiffening(fam: Families, mask, others) -> Candidate | None:
-    if not _linear_only(fam):
-        return None
-    y, k = fam.r_s, fam.k
-    cols = [fam.lp(fam.d_hat), fam.lp(fam.d_hat ** 3), np.ones_like(y)]
-    c, _ = _ls(cols, y, mask)
-    k1, k3 = k + c[0], c[1]
-    dmax = float(np.quantile(np.abs(fam.d_hat[fam.keep_s]), 0.98))
-    k_edge = k1 + 3 * k3 * dmax**2
-    contribution = np.column_stack(cols) @ c
-    params = {"k1": k1, "k3": k3, "stiffness_at_max_deflection": k_edge}
-    loc = {"signal": "spring torque vs deflection", "where": "large deflections",
-           "stiffness_small_Nm_per_rad": k1, "stiffness_at_mrad": {f"{1e3 * dmax:.2f}": k_edge}}
-
-    def explain(g):
-        word = "rises" if k3 > 0 else "falls"
-        return (f"The joint's stiffness {word} with the load: {k1:.4g} N m/rad near zero deflection and "
-                f"{k_edge:.4g} N m/rad at {1e3 * dmax:.2f} mrad. Harmonic drives stiffen as more flexspline "
-                f"teeth come into contact (the K1 < K2 < K3 of their datasheets); a cubic spring "
-                f"k1 delta + k3 delta^3 (k3 {k3:.3g} N m/rad^3) replaces the linear one.")
-    return Candidate("stiffening", "spring", params, 2, contribution,
-                     lambda m: m.with_(spring=CubicSpring(k1=k1, k3=k3)), loc, explain)
-
-
-def backlash(fam: Families, mask, others) -> Candidate | None:
+    """A stiffness that changes with the load: the three-slope spring of harmonic-drive datasheets
+    (K1, K2, K3 between two breakpoints), breakpoints by variable projection on a quantile grid."""
     if not _linear_only(fam):
         return None
     y, k = fam.r_s, fam.k
     d = fam.d_hat
+    qs = np.quantile(np.abs(d[fam.keep_s]), [0.05, 0.1, 0.2, 0.3, 0.45, 0.6, 0.75, 0.9])
+
+    def cols(d1, d2):
+        return [fam.lp(b) for b in _three_slopes(d, d1, d2)] + [fam.lp(d), np.ones_like(y)]
+
+    def rss(x):
+        d1, d2 = min(x), max(x)
+        if d2 - d1 < 1e-7:
+            return np.inf
+        return _ls([c for i, c in enumerate(cols(d1, d2)) if i != 3], y, mask)[1]   # r_s = sum (K_i - k) phi_i
+
+    pairs = [(a, b) for ia, a in enumerate(qs) for b in qs[ia + 1:]]
+    d1, d2 = min(pairs, key=rss)
+    x = minimize(rss, np.array([d1, d2]), method="Nelder-Mead", options={"xatol": 1e-6, "fatol": 1e-9, "maxfev": 60}).x
+    d1, d2 = float(min(x)), float(max(x))
+    basis = [c for i, c in enumerate(cols(d1, d2)) if i != 3]
+    c, _ = _ls(basis, y, mask)
+    K = k + c[:3]
+    if not np.all(K > 0) or K[0] < 0.2 * K[1]:     # a soft centre with almost no stiffness is backlash
+        return None
+    contribution = np.column_stack(basis) @ c
+    tau1, tau2 = K[0] * d1, K[0] * d1 + K[1] * (d2 - d1)
+    params = {"k1": float(K[0]), "k2": float(K[1]), "k3": float(K[2]), "tau1": float(tau1), "tau2": float(tau2)}
+    loc = {"signal": "spring torque vs deflection", "where": "stiffness changes with the load",
+           "breakpoints_mrad": [1e3 * d1, 1e3 * d2], "breakpoints_Nm": [float(tau1), float(tau2)]}
+
+    def explain(g):
+        trend = "rises" if K[2] > K[0] else "falls"
+        return (f"The joint's stiffness {trend} with the load: {K[0]:.4g} N m/rad below {tau1:.1f} N m, "
+                f"{K[1]:.4g} N m/rad up to {tau2:.1f} N m and {K[2]:.4g} N m/rad beyond. Harmonic drives stiffen "
+                f"as more flexspline teeth come into contact (the K1 < K2 < K3 of their datasheets, soft wind-up "
+                f"at low torque); a three-slope spring replaces the linear one.")
+    from ..dynamics import PiecewiseSpring
+    el = PiecewiseSpring(k1=float(K[0]), k2=float(K[1]), k3=float(K[2]), tau1=float(tau1), tau2=float(tau2))
+    return Candidate("stiffening", "spring", params, 5, contribution, lambda m: m.with_(spring=el), loc, explain)
+
+
+def backlash(fam: Families, mask, others) -> Candidate | None:
+    """A dead zone of total width `gap` in front of the spring: tau = k_b dz(delta), fitted as
+    r_s + k delta = k_b dz(delta) (one stiffness, consistent on both sides of the gap)."""
+    if not _linear_only(fam):
+        return None
+    y, k = fam.r_s, fam.k
+    d = fam.d_hat
+    yk = y + fam.lp(k * d)
 
     def cols(gap):
-        dz = np.sign(d) * np.maximum(np.abs(d) - gap / 2, 0.0)
-        return [fam.lp(dz - d), fam.lp(d), np.ones_like(y)]
+        return [fam.lp(np.sign(d) * np.maximum(np.abs(d) - gap / 2, 0.0)), np.ones_like(y)]
 
     span = float(np.quantile(np.abs(d[fam.keep_s]), 0.9))
     gaps = np.geomspace(1e-3 * span, span, 12)
-    g0 = min(gaps, key=lambda g: _ls(cols(g), y, mask)[1])
-    gap = float(minimize_scalar(lambda g: _ls(cols(g), y, mask)[1], bounds=(g0 / 2, min(2 * g0, 2 * span)),
+    g0 = min(gaps, key=lambda g: _ls(cols(g), yk, mask)[1])
+    gap = float(minimize_scalar(lambda g: _ls(cols(g), yk, mask)[1], bounds=(g0 / 2, min(2 * g0, 2 * span)),
                                 method="bounded", options={"xatol": 1e-7}).x)
-    c, _ = _ls(cols(gap), y, mask)
-    k_dz = k + c[1]        # the spring behind the dead zone: k_b dz(d) = k_b (dz - d) + k_b d
-    contribution = np.column_stack(cols(gap)) @ c
-    if not (c[0] > 0 and k_dz > 0):
-        return None
+    c, _ = _ls(cols(gap), yk, mask)
     k_b = float(c[0])
+    if not 0.5 * k < k_b < 2.0 * k:
+        return None
+    contribution = np.column_stack(cols(gap)) @ c - fam.lp(k * d)
     params = {"gap_rad": gap, "k": k_b}
     loc = {"signal": "spring torque vs deflection", "where": "torque reversals", "dead_zone_mrad": 1e3 * gap}
 
@@ -277,8 +305,8 @@ def stribeck(fam: Families, mask, others) -> Candidate | None:
     vs = float(np.exp(minimize_scalar(lambda lv: _ls(cols(np.exp(lv)), y, mask)[1],
                                       bounds=(np.log(max(vmin, v0 / 1.5)), np.log(v0 * 1.5)), method="bounded").x))
     c, _ = _ls(cols(vs), y, mask)
-    # r_l = tau_s - (I q'' + G + F_nominal) = (fs - fc) e^.. sign  with the true friction F = F_nominal + that
-    peak = -float(c[0])
+    # r_l = tau_s - (I q'' + G + F_nominal) = F_true - F_nominal = (fs - fc) exp(-(q'/vs)^2) sign(q')
+    peak = float(c[0])
     if not peak > 0:
         return None
     fc, fv = cv
@@ -303,7 +331,7 @@ def friction_asymmetry(fam: Families, mask, others) -> Candidate | None:
     qd = fam.qd_hat
     cols = [fam.lp(np.abs(np.sign(qd))), fam.lp(np.abs(qd))]
     c, _ = _ls(cols, fam.r_l, mask)
-    dc, dv = -float(c[0]), -float(c[1])          # r_l = -(dc + dv |q'|)
+    dc, dv = float(c[0]), float(c[1])            # r_l = F_true - F_nominal = dc + dv |q'| while moving
     fc, fv = cv
     contribution = np.column_stack(cols) @ c
     el = AsymmetricCoulombViscous(c_pos=fc + dc, c_neg=fc - dc, v_pos=fv + dv, v_neg=fv - dv)
@@ -333,14 +361,28 @@ def position_dependent_friction(fam: Families, mask, others) -> Candidate | None
             out += [fam.lp(s * np.cos(n * q)), fam.lp(s * np.sin(n * q))]
         return out + [np.ones_like(y)]
 
-    chosen: list[float] = []
-    for _ in range(2):
-        best = min((n for n in orders if n not in chosen), key=lambda n: _ls(cols(chosen + [n]), y, mask)[1])
-        chosen.append(float(best))
+    # every pair of orders: the columns once, then the normal equations of each pair
+    allc = np.column_stack(cols(list(orders)))            # (T, 2 K + 1), the constant last
+    Am = allc[mask]
+    G, g = Am.T @ Am, Am.T @ y[mask]
+    yy = float(y[mask] @ y[mask])
+    K = orders.size
+    best = None
+    for i in range(K):
+        for j in range(i + 1, K):
+            idx = [2 * i, 2 * i + 1, 2 * j, 2 * j + 1, 2 * K]
+            try:
+                cc = np.linalg.solve(G[np.ix_(idx, idx)], g[idx])
+            except np.linalg.LinAlgError:
+                continue
+            rss = yy - float(g[idx] @ cc)
+            if best is None or rss < best[0]:
+                best = (rss, [float(orders[i]), float(orders[j])])
+    chosen = best[1]
     c, _ = _ls(cols(chosen), y, mask)
     amps, phases = [], []
     for i in range(len(chosen)):
-        a, b = -c[2 * i], -c[2 * i + 1]           # F gains s (a cos + b sin) = s A cos(n q + phi)
+        a, b = c[2 * i], c[2 * i + 1]             # F gains s (a cos + b sin) = s A cos(n q + phi)
         amps.append(float(np.hypot(a, b)))
         phases.append(float(np.arctan2(-b, a)))
     contribution = np.column_stack(cols(chosen)) @ c
@@ -383,35 +425,45 @@ def coupling(fam: Families, mask, others) -> Candidate | None:
 
 
 def gravity_mismatch(fam: Families, mask, others) -> Candidate | None:
+    """A smooth torque of the joint angle alone: Chebyshev polynomials T_1..T_4 over the range the
+    joint covered (well conditioned where a Fourier series in q over a fraction of a turn is not;
+    the constant is left to the friction asymmetry, which it cannot be told from while moving)."""
     q = fam.q_hat
-    orders = (1.0, 2.0, 3.0)
-    cols = []
-    for n in orders:
-        cols += [fam.lp(np.cos(n * q)), fam.lp(np.sin(n * q))]
+    lo, hi = float(np.min(q[fam.keep_l])), float(np.max(q[fam.keep_l]))
+    center, half = 0.5 * (lo + hi), max(0.5 * (hi - lo), 1e-3)
+    x = (q - center) / half
+    deg = 4
+    cols = [fam.lp(np.polynomial.chebyshev.chebval(x, [0] * j + [1])) for j in range(1, deg + 1)]
+    cols.append(np.ones_like(q))
     c, _ = _ls(cols, fam.r_l, mask)
-    # r_l = tau_s - (... - tau_pos(q)): the missing tau_pos = -(fitted)
-    cos_, sin_ = [-float(x) for x in c[0::2]], [-float(x) for x in c[1::2]]
-    pt_new = PositionTorque(orders, cos_, sin_)
+    # the true link equation: I q'' + G + F - tau_pos(q) = tau_s, so r_l = -tau_pos(q)
+    cheb = tuple(-float(v) for v in c[:deg])
+    pt_new = PositionTorque(chebyshev_Nm=cheb, center_rad=center, half_range_rad=half)
     contribution = np.column_stack(cols) @ c
-    qs = np.linspace(float(np.min(q[fam.keep_l])), float(np.max(q[fam.keep_l])), 5)
-    params = {"orders": list(orders), "cos_Nm": cos_, "sin_Nm": sin_}
+    qs = np.linspace(lo, hi, 5)
+    params = {"chebyshev_Nm": list(cheb), "center_rad": center, "half_range_rad": half}
     loc = {"signal": "link torque", "where": "function of the joint angle only",
            "torque_Nm_at_q_rad": {f"{a:.3f}": float(pt_new.torque(a)) for a in qs}}
 
     def explain(g):
         tq = pt_new.torque(qs)
         return (f"A smooth torque that depends on the joint angle alone, from {tq.min():+.2f} to {tq.max():+.2f} N m "
-                f"over q = {qs[0]:.2f} .. {qs[-1]:.2f} rad, is missing from the gravity model: a gravity "
-                f"balancer, cable or hose forces, or a mass or centre of mass off in the model. It is not of the "
-                f"m g l sin q form alone, so fix the gravity model (or add a balancer) rather than the friction.")
+                f"over q = {lo:.2f} .. {hi:.2f} rad (relative to its mean), is missing from the gravity model: a "
+                f"gravity balancer, cable or hose forces, or a mass or centre of mass off in the model. It is not "
+                f"of the m g l sin q form alone, so fix the gravity model (or add a balancer) rather than the friction.")
 
     def apply(m):
-        old = m.position_torque
-        if old is None:
+        if m.position_torque is None:
             return m.with_(position_torque=pt_new)
-        return m.with_(position_torque=PositionTorque(old.orders + orders, old.cos_Nm + tuple(cos_),
-                                                      old.sin_Nm + tuple(sin_)))
-    return Candidate("gravity_mismatch", "link", params, 6, contribution, apply, loc, explain)
+        old = m.position_torque
+        new = np.array(cheb)
+        if old.chebyshev_Nm and np.isclose(old.center_rad, center) and np.isclose(old.half_range_rad, half):
+            prev = np.zeros(max(len(old.chebyshev_Nm), deg))
+            prev[: len(old.chebyshev_Nm)] = old.chebyshev_Nm
+            prev[:deg] += new
+            new = prev
+        return m.with_(position_torque=PositionTorque(old.orders, old.cos_Nm, old.sin_Nm, tuple(new), center, half))
+    return Candidate("gravity_mismatch", "link", params, deg, contribution, apply, loc, explain)
 
 
 FITTERS = {"hysteresis": hysteresis, "stiffening": stiffening, "backlash": backlash,

@@ -222,7 +222,7 @@ def _search(fams, qdd, names, tried, holdout):
 
 
 def discover(signals: dict, models: dict, *, fs_hz: float, validation: dict | None = None, holdout: float = 0.3,
-             alpha: float = 1e-3, min_explained_Nm: float = 0.05, max_effects: int = 3,
+             alpha: float = 1e-10, min_explained_Nm: float = 0.05, max_effects: int = 3,
              effects=EFFECTS, simulate: bool = True) -> Discovery:
     """Discover what `models` miss in the recording `signals` (joint -> JointSignals).
 

@@ -160,30 +160,40 @@ class GravityBalancer:
 
 @dataclass(frozen=True)
 class PositionTorque:
-    """A torque on the link that depends on the joint angle only, as a Fourier series:
+    """A torque on the link that depends on the joint angle only: a Fourier series plus a
+    Chebyshev series over an angle range,
 
-        tau(q) = sum_k c_k cos(n_k q) + s_k sin(n_k q)          (N m, n_k cycles per revolution)
+        tau(q) = sum_k c_k cos(n_k q) + s_k sin(n_k q) + sum_j a_j T_j((q - center) / half_range)
 
-    It enters the link equation on the right like a balancer (``Drivetrain.balancer`` takes it):
-    ``I q'' + G(q) + F = tau_s + tau(q)``. The generic form of a gravity-model error (a balancer,
-    a cable, a wrong mass or centre of mass) when its physical cause is unknown.
+    (N m; n_k cycles per revolution; T_j the Chebyshev polynomials, j = 1, 2, ...; the Chebyshev
+    part describes the range it was fitted on and is not meant far outside it). It enters the link
+    equation on the right like a balancer (``Drivetrain.balancer`` takes it): ``I q'' + G(q) + F
+    = tau_s + tau(q)``: the generic form of a gravity-model error (a balancer, a cable, a wrong
+    mass or centre of mass) when its physical cause is unknown.
     """
 
-    orders: tuple[float, ...]
-    cos_Nm: tuple[float, ...]
-    sin_Nm: tuple[float, ...]
+    orders: tuple[float, ...] = ()
+    cos_Nm: tuple[float, ...] = ()
+    sin_Nm: tuple[float, ...] = ()
+    chebyshev_Nm: tuple[float, ...] = ()
+    center_rad: float = 0.0
+    half_range_rad: float = 1.0
 
     def __post_init__(self) -> None:
-        o, c, s = (_tuple(n, getattr(self, n)) for n in ("orders", "cos_Nm", "sin_Nm"))
+        o, c, s, ch = (_tuple(n, getattr(self, n)) for n in ("orders", "cos_Nm", "sin_Nm", "chebyshev_Nm"))
         if not (len(o) == len(c) == len(s)):
             raise InputError(None, "orders, cos_Nm, sin_Nm", "three sequences of equal length", (len(o), len(c), len(s)))
-        object.__setattr__(self, "orders", o)
-        object.__setattr__(self, "cos_Nm", c)
-        object.__setattr__(self, "sin_Nm", s)
+        for n, v in (("orders", o), ("cos_Nm", c), ("sin_Nm", s), ("chebyshev_Nm", ch)):
+            object.__setattr__(self, n, v)
+        object.__setattr__(self, "half_range_rad", _pos("half_range_rad", self.half_range_rad))
+        if not math.isfinite(self.center_rad):
+            raise InputError(None, "center_rad", "a finite angle", self.center_rad)
 
     @property
     def params(self) -> dict:
-        return {"orders": list(self.orders), "cos_Nm": list(self.cos_Nm), "sin_Nm": list(self.sin_Nm)}
+        return {"orders": list(self.orders), "cos_Nm": list(self.cos_Nm), "sin_Nm": list(self.sin_Nm),
+                "chebyshev_Nm": list(self.chebyshev_Nm), "center_rad": self.center_rad,
+                "half_range_rad": self.half_range_rad}
 
     def torque(self, q) -> np.ndarray:
         """Torque on the link, N m, same shape as `q` (rad)."""
@@ -191,6 +201,9 @@ class PositionTorque:
         out = np.zeros_like(q)
         for n, c, s in zip(self.orders, self.cos_Nm, self.sin_Nm):
             out = out + c * np.cos(n * q) + s * np.sin(n * q)
+        if self.chebyshev_Nm:
+            x = (q - self.center_rad) / self.half_range_rad
+            out = out + np.polynomial.chebyshev.chebval(x, (0.0,) + self.chebyshev_Nm)
         return out
 
 
