@@ -222,12 +222,15 @@ def _search(fams, qdd, names, tried, holdout):
 
 
 def discover(signals: dict, models: dict, *, fs_hz: float, validation: dict | None = None, holdout: float = 0.3,
-             alpha: float = 1e-10, min_explained_Nm: float = 0.05, max_effects: int = 3,
+             alpha: float = 1e-10, min_explained: float = 0.003, max_effects: int = 3,
              effects=EFFECTS, simulate: bool = True) -> Discovery:
     """Discover what `models` miss in the recording `signals` (joint -> JointSignals).
 
     alpha : significance after the Bonferroni correction over the effects and joints tried.
-    min_explained_Nm : an effect must explain at least this torque RMS on the held-out part.
+    min_explained : an effect must explain, on the held-out part, a torque RMS of at least this
+        fraction of the joint's motor-torque RMS (0.3 %: 0.1 N m on a joint whose torque varies by
+        35 N m RMS; below that no engineer would change a model, and what the search finds is the
+        model compensating its own small misfits).
     simulate : run the output-error simulations (fit before / after); False for the search alone.
     """
     unknown = [e for e in effects if e not in FITTERS]
@@ -248,7 +251,8 @@ def discover(signals: dict, models: dict, *, fs_hz: float, validation: dict | No
         if not results:
             break
         n_tests = len(results)
-        sig = [(jn, c, s) for jn, c, s in results if s["p_value"] * n_tests < alpha and s["explained_Nm"] >= min_explained_Nm]
+        floor = {jn: min_explained * float(np.std(fams[jn].u[fams[jn].keep_s])) for jn in names}
+        sig = [(jn, c, s) for jn, c, s in results if s["p_value"] * n_tests < alpha and s["explained_Nm"] >= floor[jn]]
         if not sig:
             break
         jn, cand, score = max(sig, key=lambda x: x[2]["explained_Nm"])

@@ -1,0 +1,73 @@
+"""Parts of mocapfj.discover against analytic truth: fit %, effective sample count, model files,
+the generic position torque, bad input."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from mocapfj import InputError
+from mocapfj.discover import JointSignals, discover, fit_pct, read_model_file, write_model_file
+from mocapfj.discover.engine import effective_n
+from mocapfj.dynamics import BoucWen, PositionTorque
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def test_fit_pct_is_the_conventions_definition():
+    y = np.array([1.0, 2.0, 3.0, 4.0])
+    assert fit_pct(y, y) == 100.0
+    assert fit_pct(y, np.full(4, y.mean())) == pytest.approx(0.0)
+    assert fit_pct(y, y + np.array([1.0, -1.0, 1.0, -1.0])) == pytest.approx(100 * (1 - 2 / np.sqrt(5)))
+
+
+def test_effective_sample_count_of_an_ar1_process():
+    """AR(1) with coefficient rho: n_eff = n (1 - rho) / (1 + rho) (the sum of its autocorrelation)."""
+    rng = np.random.default_rng(0)
+    rho, n = 0.8, 200_000
+    e = rng.normal(size=n)
+    x = np.empty(n)
+    x[0] = e[0]
+    for i in range(1, n):          # a test generator, not a hot path
+        x[i] = rho * x[i - 1] + e[i]
+    assert effective_n(x) == pytest.approx(n * (1 - rho) / (1 + rho), rel=0.1)
+    assert effective_n(e) == pytest.approx(n, rel=0.05)
+
+
+def test_model_file_round_trip_and_scenario_files(tmp_path):
+    models = read_model_file(ROOT / "datasets" / "suite" / "hysteresis_ident.toml")   # a scenario: no effects
+    m = models["j2"]
+    assert type(m.spring).__name__ == "LinearSpring" and m.I == 6.15 and m.gear_ratio == 50.0
+    aug = m.with_(spring=BoucWen(k=11900.0, alpha=0.93, beta=300.0, gamma=300.0), delay_s=1e-3,
+                  position_torque=PositionTorque(chebyshev_Nm=(1.0, -0.5), center_rad=0.3, half_range_rad=0.4),
+                  coupling={"j3": 2.5}, torque_gain=1.05)
+    write_model_file(tmp_path / "m.toml", [aug], [{"name": "hysteresis", "joint": "j2"}])
+    back = read_model_file(tmp_path / "m.toml")["j2"]
+    assert back == aug
+
+
+def test_position_torque_is_its_series():
+    pt = PositionTorque(orders=(2.0,), cos_Nm=(1.0,), sin_Nm=(0.5,), chebyshev_Nm=(2.0, 3.0), center_rad=0.1,
+                        half_range_rad=0.5)
+    q = np.array([0.1, 0.35, -0.2])
+    x = (q - 0.1) / 0.5
+    expect = np.cos(2 * q) + 0.5 * np.sin(2 * q) + 2.0 * x + 3.0 * (2 * x**2 - 1)
+    np.testing.assert_allclose(pt.torque(q), expect, rtol=1e-12)
+
+
+def test_bad_input(tmp_path):
+    t = np.arange(3000) / 250.0
+    sig = {"j2": JointSignals(t, 0.1 * np.sin(t), 0.1 * np.sin(t), np.sin(t))}
+    models = read_model_file(ROOT / "datasets" / "pa10_joint2.toml")
+    with pytest.raises(InputError, match="effects: expected names from"):
+        discover(sig, models, fs_hz=250.0, effects=("friction_waves",))
+    with pytest.raises(InputError, match=r"model: expected a model for every joint of the recording \['j9'\]"):
+        discover({"j9": sig["j2"]}, models, fs_hz=250.0)
+    (tmp_path / "bad.toml").write_text('format = "mocapfj.model/1"\n[[joints]]\nname = "j2"\nI = 1.0\n')
+    with pytest.raises(InputError, match=r"bad.toml: joints\[j2\]\.J: expected a value of type integer or number"):
+        read_model_file(tmp_path / "bad.toml")
+    (tmp_path / "old.toml").write_text('format = "mocapfj.model/9"\n')
+    with pytest.raises(InputError, match="format"):
+        read_model_file(tmp_path / "old.toml")
