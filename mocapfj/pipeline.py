@@ -741,7 +741,7 @@ def run_discover(recording, out: str | Path, model: str | Path | None = None, va
     d = discover(signals, models, fs_hz=rec.markers.rate_hz, validation=val)
     summary = {"recording": str(recording), "model": str(model) if model is not None else "identified",
                "effects": d.effects, "fit_before": d.fit_before, "fit_after": d.fit_after, "fits": d.fits,
-               "location": d.location, "validation": d.validation,
+               "location": d.location, "validation": d.validation, "stopped": d.stopped,
                "verdict": "no missing physics found" if not d.effects else
                "missing physics: " + ", ".join(f"{e['name']} ({e['joint']})" for e in d.effects)}
     write_json(out / "discovery.json", summary)

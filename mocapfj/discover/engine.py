@@ -50,7 +50,8 @@ class Discovery:
     (joint -> augmented JointModel), `nominal` (joint -> JointModel), `fit_before`, `fit_after`
     (joint -> fit %), `fits` (joint -> {before, after} details), `location` (joint -> residual
     statistics), `validation` (same keys on the validation recording, or None), `residuals`
-    (joint -> {t, before/after deflection and torque residuals} for the report)."""
+    (joint -> {t, before/after deflection and torque residuals} for the report), `stopped` (why
+    the search ended: white residuals, nothing significant left, or the effect limit)."""
 
     effects: list
     models: dict
@@ -61,6 +62,7 @@ class Discovery:
     location: dict
     validation: dict | None
     residuals: dict = field(default_factory=dict)
+    stopped: str = ""
 
 
 def effective_n(r: np.ndarray) -> float:
@@ -245,15 +247,22 @@ def discover(signals: dict, models: dict, *, fs_hz: float, validation: dict | No
     fams, qdd = _families_all(current, signals, fs_hz)
     location = {n: locate(fams[n]) for n in names}
     found = []
+    stop = f"{max_effects} effects found (the most searched for)"
     for _ in range(max_effects):
+        if all(_ljung_box(f.r_s[f.keep_s], fs_hz) > 0.01 and _ljung_box(f.r_l[f.keep_l], fs_hz) > 0.01
+               for f in fams.values()):
+            stop = "the residuals are white"
+            break
         tried = [e for e in effects if not any(f["name"] == e for f in found)]
         results = _search(fams, qdd, names, tried, holdout)
         if not results:
+            stop = "no effect of the library applies"
             break
         n_tests = len(results)
         floor = {jn: min_explained * float(np.std(fams[jn].u[fams[jn].keep_s])) for jn in names}
         sig = [(jn, c, s) for jn, c, s in results if s["p_value"] * n_tests < alpha and s["explained_Nm"] >= floor[jn]]
         if not sig:
+            stop = "no further effect is significant"
             break
         jn, cand, score = max(sig, key=lambda x: x[2]["explained_Nm"])
         # refit on the whole trial, augment, recompute the residuals
@@ -312,4 +321,4 @@ def discover(signals: dict, models: dict, *, fs_hz: float, validation: dict | No
                             "parameters": c.params, "p_value": f["p_value"],
                             "fit_gain_pct": f.get("fit_gain_pct"), "runner_up": f["runner_up"]})
     return Discovery(effects=effects_out, models=current, nominal=nominal, fit_before=fit_before, fit_after=fit_after,
-                     fits=fits, location=location, validation=val, residuals=residuals)
+                     fits=fits, location=location, validation=val, residuals=residuals, stopped=stop)
