@@ -67,6 +67,8 @@ def _coulomb(fam: Families) -> tuple[float, float] | None:
 # ---------------------------------------------------------------- spring residual
 
 def hysteresis(fam: Families, mask, others) -> Candidate | None:
+    """A Bouc-Wen spring: the state z(delta; beta, gamma) along the rebuilt deflection (vibration
+    included, mocap noise not), its shape by variable projection (grid, then Nelder-Mead)."""
     if not _linear_only(fam):
         return None
     y, k = fam.r_s, fam.k
@@ -195,6 +197,8 @@ def backlash(fam: Families, mask, others) -> Candidate | None:
 
 
 def transmission_error(fam: Families, mask, others) -> Candidate | None:
+    """Kinematic error e(q_m) at 1x and 2x the wave-generator angle N q_m: the spring sees delta + e
+    and the motor tau_s (1 + e'), linear in the sine and cosine amplitudes."""
     m = fam.model
     N = m.gear_ratio
     if not N > 1:
@@ -231,6 +235,8 @@ def transmission_error(fam: Families, mask, others) -> Candidate | None:
 
 
 def time_delay(fam: Families, mask, others) -> Candidate | None:
+    """The mocap link angle on a shifted clock: the delay (within +-10 ms) that minimises the spring
+    residual, by grid and bounded search."""
     t, q = fam.t, fam.q
     base = fam.r_s
 
@@ -270,6 +276,7 @@ def time_delay(fam: Families, mask, others) -> Candidate | None:
 
 
 def drive_gain(fam: Families, mask, others) -> Candidate | None:
+    """The drive delivers g u for a logged u: the spring residual gains (g_model - g) u."""
     cols = [fam.lp(fam.u), np.ones_like(fam.u)]
     c, _ = _ls(cols, fam.r_s, mask)
     g = float(fam.model.torque_gain - c[0])      # true tau_s = g u - ...: r_s = (g_model - g) u
@@ -288,6 +295,8 @@ def drive_gain(fam: Families, mask, others) -> Candidate | None:
 # ---------------------------------------------------------------- link residual
 
 def stribeck(fam: Families, mask, others) -> Candidate | None:
+    """Breakaway friction above Coulomb at low speed, (fs - fc) exp(-(q'/vs)^2) sign(q') (seed 001
+    eq. 7), vs by variable projection."""
     cv = _coulomb(fam)
     if cv is None:
         return None
@@ -325,6 +334,8 @@ def stribeck(fam: Families, mask, others) -> Candidate | None:
 
 
 def friction_asymmetry(fam: Families, mask, others) -> Candidate | None:
+    """Coulomb and viscous friction that differ with the sign of the velocity: while moving, a
+    constant and |q'| term on top of the symmetric model."""
     cv = _coulomb(fam)
     if cv is None:
         return None
@@ -349,8 +360,8 @@ def friction_asymmetry(fam: Families, mask, others) -> Candidate | None:
 
 
 def position_dependent_friction(fam: Families, mask, others) -> Candidate | None:
-    if _coulomb(fam) is None and not hasattr(fam.model.friction, "with_smoothing"):
-        return None
+    """A Coulomb level that ripples with the joint angle: the best pair of orders (cycles per
+    revolution, 2 to 40) by exhaustive search, their amplitudes and phases by least squares."""
     q, s = fam.q_hat, np.sign(fam.qd_hat)
     y = fam.r_l
     orders = np.arange(2, 41, dtype=float)
@@ -403,6 +414,7 @@ def position_dependent_friction(fam: Families, mask, others) -> Candidate | None
 
 
 def coupling(fam: Families, mask, others) -> Candidate | None:
+    """Torque from the other recorded joints' link accelerations, -inertia x q_other''."""
     srcs = [s for s in (others or {}) if s != fam.model.name and s not in fam.model.coupling]
     if not srcs:
         return None

@@ -8,11 +8,12 @@ show the fit improve (issue "mismatch discovery"; docs/discovery.md).
    cross-correlation with the inputs at each lag, each with its strength and significance.
 3. Name and model: every effect of the library (:mod:`.effects`) is fitted on the first part of
    the trial and scored on the held-out rest: the torque it explains there, sqrt(RSS_before -
-   RSS_after) / sqrt(n), and an F test with the residual's effective sample count (its
-   autocorrelation counted), Bonferroni-corrected over the effects tried. The strongest
-   significant effect is added to the model, the residuals recomputed, and the search repeated
-   until nothing significant is left (or the residual is white); the chosen effects are refitted
-   on the whole trial.
+   RSS_after) / sqrt(n), an F test with the residual's effective sample count (its
+   autocorrelation counted), Bonferroni-corrected over the effects tried, and a held-out
+   information criterion n_eff ln(RSS_after / RSS_before) + p ln(n_eff). Among the significant
+   effects the one with the lowest criterion (the largest gain for its complexity) is added to
+   the model, the residuals recomputed, and the search repeated until nothing significant is left
+   (or the residuals are white); the chosen effects are refitted on the whole trial.
 4. Prove: the augmented model's output-error fit against the nominal one, on the trial and on a
    validation recording.
 """
@@ -187,9 +188,12 @@ def _score(cand: Candidate, fam: Families, test: np.ndarray) -> dict:
     rss0, rss1 = float(r0 @ r0), float(r1 @ r1)
     n = int(m.sum())
     n_eff = effective_n(r1)
+    # held-out information criterion (BIC form, effective sample count): the gain less the
+    # complexity penalty; lower is better, negative means the effect pays for its parameters
+    crit = n_eff * np.log(max(rss1, 1e-300) / max(rss0, 1e-300)) + cand.n_params * np.log(n_eff)
     return {"explained_Nm": float(np.sqrt(max(rss0 - rss1, 0.0) / n)), "rms_before_Nm": float(np.sqrt(rss0 / n)),
             "rms_after_Nm": float(np.sqrt(rss1 / n)), "p_value": _ftest(rss0, rss1, cand.n_params, n_eff),
-            "n_effective": n_eff}
+            "n_effective": n_eff, "criterion": float(crit)}
 
 
 def _families_all(models, signals, fs_hz):
@@ -264,7 +268,7 @@ def discover(signals: dict, models: dict, *, fs_hz: float, validation: dict | No
         if not sig:
             stop = "no further effect is significant"
             break
-        jn, cand, score = max(sig, key=lambda x: x[2]["explained_Nm"])
+        jn, cand, score = min(sig, key=lambda x: x[2]["criterion"])
         # refit on the whole trial, augment, recompute the residuals
         fam = fams[jn]
         full = FITTERS[cand.name](fam, _residual_of(fam, cand.family)[1], {k: v for k, v in qdd.items() if k != jn})

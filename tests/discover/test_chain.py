@@ -79,3 +79,13 @@ def test_cli_discover_with_validation(tmp_path_factory, capsys):
     assert type(augmented.spring).__name__ == "BoucWen"
     cols = read_csv_columns(out / "residuals.csv")
     assert {"t", "j2_r_delta_before", "j2_r_u_after"} <= set(cols)
+
+
+def test_cli_discover_against_the_model_identified_on_the_spot(tmp_path_factory, capsys):
+    """Without --model each joint is identified on the trial (motor-first, linear spring); on the
+    no-effect control nothing is missing."""
+    b = _bundle(tmp_path_factory, ROOT / "datasets" / "suite" / "control_ident.toml", 20.0)
+    assert main(["discover", str(b), "--out", str(b.parent / "out"), "--json"]) == 0
+    s = json.loads(capsys.readouterr().out)
+    assert s["model"] == "identified" and s["effects"] == [] and s["verdict"] == "no missing physics found"
+    assert s["fit_after"] == s["fit_before"]
