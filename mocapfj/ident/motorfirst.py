@@ -104,52 +104,13 @@ class MotorStage:
 
 
 def motor_stage(t, q, q_m, u, *, fs_hz: float, cutoff_hz: float = 5.0, link_cutoff_hz: float = 20.0,
-                               split_hz: float = 2.0, decimate: int = 2,
-                               trim_s: float = 1.0, spring=None, q_zero_rad: float = 0.0,
-                               hysteresis: bool = True, min_gain_pct: float = 2.0,
-                               bias_compensation: bool = True) -> MotorStage:
+                split_hz: float = 2.0, decimate: int = 2, trim_s: float = 1.0, spring=None, q_zero_rad: float = 0.0,
+                hysteresis: bool = True, min_gain_pct: float = 2.0, bias_compensation: bool = True) -> MotorStage:
     """The motor equation of one joint (J, b, k, tau0), its spring torque and the rebuilt link angle.
 
-    The first half of :func:`identify_joint_motor_first`, which documents the parameters (all but
-    `sign_eps`); the n-link identification (:mod:`.nlink`) runs it per joint.
-
-    Parameters
-    ----------
-    t, q, q_m, u : (T,) float
-        Times (s, uniform at fs_hz, one clock), link angle from mocap (rad), motor angle / N
-        (rad), motor torque x N (N m): the link side, docs/conventions.md.
-    fs_hz : float
-        Sampling rate, Hz.
-    cutoff_hz : float
-        Zero-phase low-pass of the motor equation (linear: sets only the noise), Hz.
-    link_cutoff_hz : float
-        Low-pass of the link equation and of the spring samples, Hz; below the Nyquist rate.
-    split_hz : float
-        Cross-over of the rebuilt link angle between mocap deflection and tau_s / k, Hz.
-    decimate : int
-        Parallel decimation of the motor equation (seed 003 §3).
-    trim_s : float
-        Seconds dropped at both ends (filter transients).
-    spring : callable, optional
-        A nonlinear spring shape f(delta, t) -> N m (e.g. a fitted `springs.SpringFit.predict`,
-        t in s) for the motor equation, which then reads J q_m'' + b q_m' + s f(delta) + tau0
-        = u, with delta = q_m - q + e low-passed as the equation and e = `q_zero_rad` (found by a
-        first, linear pass); the reported k is s times the shape's mean slope. Default: the
-        linear spring k delta, and e = tau0 / k.
-    q_zero_rad : float
-        The link-angle zero e of a first pass, for `spring`, rad (ignored without it).
-    hysteresis : bool
-        Test the motor equation for a hysteretic spring (see the module docstring) and, when it
-        is found, identify J, b and the Bouc-Wen spring together (ignored with `spring`).
-    min_gain_pct : float
-        The hysteretic spring is kept when it lowers the motor equation's residual RMS by at
-        least this much, %.
-
-    Raises
-    ------
-    InputError
-        Bad shapes, NaN, non-uniform time, a recording too short for the filters, a parameter
-        the trajectory does not excite (named), a spring that does not stiffen (k <= 0).
+    The first half of :func:`identify_joint_motor_first`, whose docstring documents the
+    parameters (all but `sign_eps`) and the errors; the n-link identification (:mod:`.nlink`)
+    runs it per joint.
     """
     t, q, q_m, u = _check_inputs(t, q, q_m, u, fs_hz)
     n_trim = int(round(trim_s * fs_hz))
