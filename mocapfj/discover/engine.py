@@ -227,6 +227,24 @@ def _search(fams, qdd, names, tried, holdout):
     return results
 
 
+def _fits(before, after) -> dict:
+    return {"before": {"deflection": before.fit_delta, "torque": before.fit_u, "fit": before.fit},
+            "after": {"deflection": after.fit_delta, "torque": after.fit_u, "fit": after.fit}}
+
+
+def _prove(model, found: list, s: JointSignals, others: dict):
+    """Output-error fits of `model` and of it with each found effect added in turn: (before,
+    after, [(effect, fit gain %)])."""
+    before = simulate_joint(model, s.t, s.q, s.q_m, s.u, others)
+    prev, gains = before, []
+    for f in found:
+        model = f["candidate"].apply(model)
+        cur = simulate_joint(model, s.t, s.q, s.q_m, s.u, others)
+        gains.append((f, cur.fit - prev.fit))
+        prev = cur
+    return before, prev, gains
+
+
 def discover(signals: dict, models: dict, *, fs_hz: float, validation: dict | None = None, holdout: float = 0.3,
              alpha: float = 1e-10, min_explained: float = 0.003, max_effects: int = 3,
              effects=EFFECTS, simulate: bool = True) -> Discovery:
@@ -284,39 +302,25 @@ def discover(signals: dict, models: dict, *, fs_hz: float, validation: dict | No
     if simulate:
         for jn in names:
             s = signals[jn]
-            others = {k: v for k, v in qdd.items() if k != jn}
-            before = simulate_joint(nominal[jn], s.t, s.q, s.q_m, s.u, others)
-            fit_before[jn] = before.fit
-            steps = [before]
-            model = nominal[jn]
-            for f in found:
-                if f["joint"] == jn:
-                    model = f["candidate"].apply(model)
-                    steps.append(simulate_joint(model, s.t, s.q, s.q_m, s.u, others))
-                    f["fit_gain_pct"] = steps[-1].fit - steps[-2].fit
-            after = steps[-1]
-            fit_after[jn] = after.fit
-            fits[jn] = {"before": {"deflection": before.fit_delta, "torque": before.fit_u, "fit": before.fit},
-                        "after": {"deflection": after.fit_delta, "torque": after.fit_u, "fit": after.fit}}
+            before, after, gains = _prove(nominal[jn], [f for f in found if f["joint"] == jn], s,
+                                          {k: v for k, v in qdd.items() if k != jn})
+            for f, g in gains:
+                f["fit_gain_pct"] = g
+            fit_before[jn], fit_after[jn], fits[jn] = before.fit, after.fit, _fits(before, after)
             residuals[jn] = {"t": s.t, "r_delta_before": before.r_delta, "r_u_before": before.r_u,
                              "r_delta_after": after.r_delta, "r_u_after": after.r_u}
         if validation is not None:
-            val = {"fit_before": {}, "fit_after": {}, "fits": {}}
-            vq = {}
-            for jn in names:
-                if jn in validation:
-                    v = validation[jn]
-                    vq[jn] = lowpass(derivatives(lowpass(v.q_m, fs_hz, 20.0), fs_hz)[1], fs_hz, 20.0)
+            val = {"effects": [], "fit_before": {}, "fit_after": {}, "fits": {}}
+            # the other joints' accelerations for coupling terms: the motor's (the links follow them)
+            vq = {jn: lowpass(derivatives(lowpass(v.q_m, fs_hz, 20.0), fs_hz)[1], fs_hz, 20.0)
+                  for jn, v in validation.items()}
             for jn in names:
                 if jn not in validation:
                     continue
-                v = validation[jn]
-                others = {k: x for k, x in vq.items() if k != jn}
-                b = simulate_joint(nominal[jn], v.t, v.q, v.q_m, v.u, others)
-                a = simulate_joint(current[jn], v.t, v.q, v.q_m, v.u, others)
-                val["fit_before"][jn], val["fit_after"][jn] = b.fit, a.fit
-                val["fits"][jn] = {"before": {"deflection": b.fit_delta, "torque": b.fit_u, "fit": b.fit},
-                                   "after": {"deflection": a.fit_delta, "torque": a.fit_u, "fit": a.fit}}
+                before, after, gains = _prove(nominal[jn], [f for f in found if f["joint"] == jn], validation[jn],
+                                              {k: x for k, x in vq.items() if k != jn})
+                val["effects"] += [{"name": f["name"], "joint": jn, "fit_gain_pct": g} for f, g in gains]
+                val["fit_before"][jn], val["fit_after"][jn], val["fits"][jn] = before.fit, after.fit, _fits(before, after)
     for f in found:
         c = f["candidate"]
         effects_out.append({"name": c.name, "joint": f["joint"], "explanation": c.explain(f["score"]),

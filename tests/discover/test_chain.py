@@ -75,6 +75,7 @@ def test_cli_discover_with_validation(tmp_path_factory, capsys):
     assert s["fit_after"]["j2"] > s["fit_before"]["j2"]
     v = s["validation"]
     assert v["fit_after"]["j2"] > v["fit_before"]["j2"]
+    assert [(x["name"], x["joint"]) for x in v["effects"]] == [("hysteresis", "j2")] and v["effects"][0]["fit_gain_pct"] > 0
     augmented = read_model_file(out / "model.toml")["j2"]
     assert type(augmented.spring).__name__ == "BoucWen"
     cols = read_csv_columns(out / "residuals.csv")
