@@ -168,7 +168,8 @@ def locate(fam: Families) -> dict:
             i = int(np.argmax(np.abs(rho)))
             z = abs(rho[i]) * np.sqrt(max(n_eff - 3, 1))
             xc[inp_name] = {"peak_correlation": float(rho[i]), "lag_ms": float(1e3 * lags[i] * dt),
-                            "p_value": float(min(1.0, lags.size * 2 * stats.norm.sf(z)))}
+                            "p_value": float(min(1.0, lags.size * 2 * stats.norm.sf(z))),
+                            "lags_ms": [float(1e3 * L * dt) for L in lags], "correlation": [float(x) for x in rho]}
         out[name] = {"rms_Nm": rms, "n_effective": n_eff, "whiteness_p_value": _ljung_box(rr, fam.fs_hz),
                      "worst_windows": windows, "regions": reg, "periodicity": per, "bands_power_fraction": bands,
                      "cross_correlation": xc}

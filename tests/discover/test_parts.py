@@ -71,3 +71,29 @@ def test_bad_input(tmp_path):
     (tmp_path / "old.toml").write_text('format = "mocapfj.model/9"\n')
     with pytest.raises(InputError, match="format"):
         read_model_file(tmp_path / "old.toml")
+
+
+def test_locate_finds_a_delay_at_its_lag():
+    """A spring residual that is the motor velocity 12 ms late: the cross-correlation peaks at
+    +12 ms with correlation 1, and the worst windows and regions are reported with p-values."""
+    from mocapfj.discover.engine import locate
+    from mocapfj.discover.residuals import families
+    from mocapfj.ident.conditioning import derivatives, lowpass
+
+    fs = 250.0
+    t = np.arange(int(30 * fs)) / fs
+    q_m = 0.3 * np.sin(2 * np.pi * 0.2 * t) + 0.05 * np.sin(2 * np.pi * 1.1 * t)
+    m = read_model_file(ROOT / "datasets" / "pa10_joint2.toml")["j2"]
+    delta = 0.004 * np.sin(2 * np.pi * 0.2 * t + 0.3)
+    qmd, qmdd = derivatives(lowpass(q_m, fs, 20.0), fs)
+    u = m.J * qmdd + m.b * qmd + m.spring.k * delta
+    fam = families(m, t, q_m - delta, q_m, u, fs_hz=fs)
+    # plant the residual: the spring residual is replaced by a lagged velocity
+    late = np.interp(t - 0.012, t, qmd)
+    from dataclasses import replace
+    fam = replace(fam, r_s=fam.lp(late))
+    loc = locate(fam)["spring"]
+    xc = loc["cross_correlation"]["motor_velocity"]
+    assert xc["lag_ms"] == pytest.approx(12.0) and xc["peak_correlation"] > 0.99 and xc["p_value"] < 1e-10
+    assert len(xc["lags_ms"]) == len(xc["correlation"]) == 25
+    assert {"rms_Nm", "whiteness_p_value", "worst_windows", "regions", "periodicity", "bands_power_fraction"} <= set(loc)
