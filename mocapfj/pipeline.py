@@ -709,6 +709,19 @@ def _identified_models(rec: Recording, signals: dict) -> dict:
     return models
 
 
+def _verdict(d) -> str:
+    """One line: the effects found, and any mismatch the library leaves unexplained."""
+    left = [f"{j} ({fam} residual {r[f'{fam}_rms_Nm']:.3g} N m RMS)" for j, r in d.remaining.items()
+            for fam in ("spring", "link") if r[f"{fam}_unexplained"]]
+    found = ", ".join(f"{e['name']} ({e['joint']})" for e in d.effects)
+    if not d.effects and not left:
+        return "no missing physics found"
+    if not left:
+        return f"missing physics: {found}"
+    tail = "a mismatch no effect of the library explains remains on " + ", ".join(left) + " (see location)"
+    return f"missing physics: {found}; {tail}" if d.effects else f"no effect of the library found; {tail}"
+
+
 def run_discover(recording, out: str | Path, model: str | Path | None = None, validation=None) -> dict:
     """``mocapfj discover``: what the model misses in the recording (:mod:`mocapfj.discover`).
 
@@ -741,9 +754,8 @@ def run_discover(recording, out: str | Path, model: str | Path | None = None, va
     d = discover(signals, models, fs_hz=rec.markers.rate_hz, validation=val)
     summary = {"recording": str(recording), "model": str(model) if model is not None else "identified",
                "effects": d.effects, "fit_before": d.fit_before, "fit_after": d.fit_after, "fits": d.fits,
-               "location": d.location, "validation": d.validation, "stopped": d.stopped,
-               "verdict": "no missing physics found" if not d.effects else
-               "missing physics: " + ", ".join(f"{e['name']} ({e['joint']})" for e in d.effects)}
+               "location": d.location, "validation": d.validation, "stopped": d.stopped, "remaining": d.remaining,
+               "verdict": _verdict(d)}
     write_json(out / "discovery.json", summary)
     write_model_file(out / "model.toml", d.models.values(),
                      [{k: e[k] for k in ("name", "joint", "parameters", "p_value")} for e in d.effects])

@@ -52,7 +52,9 @@ class Discovery:
     (joint -> fit %), `fits` (joint -> {before, after} details), `location` (joint -> residual
     statistics), `validation` (same keys on the validation recording, or None), `residuals`
     (joint -> {t, before/after deflection and torque residuals} for the report), `stopped` (why
-    the search ended: white residuals, nothing significant left, or the effect limit)."""
+    the search ended: white residuals, nothing significant left, or the effect limit),
+    `remaining` (joint -> the residuals left against their noise floors, and whether a mismatch
+    the library does not explain remains)."""
 
     effects: list
     models: dict
@@ -64,6 +66,7 @@ class Discovery:
     validation: dict | None
     residuals: dict = field(default_factory=dict)
     stopped: str = ""
+    remaining: dict = field(default_factory=dict)
 
 
 def effective_n(r: np.ndarray) -> float:
@@ -228,6 +231,30 @@ def _search(fams, qdd, names, tried, holdout):
     return results
 
 
+def _remaining(fam: Families, signals: JointSignals) -> dict:
+    """What is left after the search: each residual's RMS against what noise alone would leave.
+
+    The spring residual's floor is the mocap noise through the spring, k sigma_q sqrt(g), with
+    sigma_q read from the top of the link angle's spectrum and g the noise gain of the residual's
+    filters; the link residual has no such floor (its angle is rebuilt without the mocap noise),
+    so it is compared with 10 % of the motor torque's spread. A residual above twice its floor, or
+    above those 10 %, is a mismatch the library does not explain."""
+    from ..ident.motorfirst import white_noise_sd
+    from .residuals import LINK_HZ, RESIDUAL_HZ
+
+    n = 4001
+    x = np.zeros(n)
+    x[n // 2] = 1.0
+    h = lowpass(lowpass(x, fam.fs_hz, LINK_HZ), fam.fs_hz, RESIDUAL_HZ)
+    floor = fam.k * white_noise_sd(signals.q, fam.fs_hz) * float(np.sqrt(h @ h))
+    rs = float(np.sqrt(np.mean(fam.r_s[fam.keep_s] ** 2)))
+    rl = float(np.sqrt(np.mean(fam.r_l[fam.keep_l] ** 2)))
+    spread = float(np.std(fam.u[fam.keep_s]))
+    return {"spring_rms_Nm": rs, "spring_noise_floor_Nm": floor, "link_rms_Nm": rl, "link_threshold_Nm": 0.1 * spread,
+            "spring_unexplained": bool(rs > 2 * floor), "link_unexplained": bool(rl > 0.1 * spread),
+            "unexplained": bool(rs > 2 * floor or rl > 0.1 * spread)}
+
+
 def _fits(before, after) -> dict:
     return {"before": {"deflection": before.fit_delta, "torque": before.fit_u, "fit": before.fit},
             "after": {"deflection": after.fit_delta, "torque": after.fit_u, "fit": after.fit}}
@@ -329,5 +356,7 @@ def discover(signals: dict, models: dict, *, fs_hz: float, validation: dict | No
                                          "explained_torque_rms_Nm": f["score"]["explained_Nm"]},
                             "parameters": c.params, "p_value": f["p_value"],
                             "fit_gain_pct": f.get("fit_gain_pct"), "runner_up": f["runner_up"]})
+    remaining = {jn: _remaining(fams[jn], signals[jn]) for jn in names}
     return Discovery(effects=effects_out, models=current, nominal=nominal, fit_before=fit_before, fit_after=fit_after,
-                     fits=fits, location=location, validation=val, residuals=residuals, stopped=stop)
+                     fits=fits, location=location, validation=val, residuals=residuals, stopped=stop,
+                     remaining=remaining)
