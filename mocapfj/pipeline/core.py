@@ -1,4 +1,5 @@
-"""Composition of the stages for the CLI and for batch runs. Plain functions on plain data."""
+"""Composition of the measurement stages: recordings summarised, scenarios simulated, the demo,
+joint calibration, link angles and deflections, and a joint's signals on one clock."""
 
 from __future__ import annotations
 
@@ -6,11 +7,12 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import InputError
-from .io import load_recording, read_markers, write_json
-from .types import JointAngles, JointGeometry, MarkerTrajectories, Recording
+from ..errors import InputError
+from ..io import load_recording, read_markers, write_json
+from ..types import JointAngles, JointGeometry, MarkerTrajectories, Recording
 
-__all__ = ["summarize_markers", "summarize_recording", "inspect_path", "run_simulate", "run_demo"]
+__all__ = ["summarize_markers", "summarize_recording", "inspect_path", "run_simulate", "run_demo", "run_joints",
+           "joint_signals", "markers_in_parent_frame", "calibrate_joint", "auto_calibrate_joint"]
 
 
 def summarize_markers(m: MarkerTrajectories, file: str = "") -> dict:
@@ -95,7 +97,7 @@ def run_demo(out: str | Path, duration_s: float | None = None) -> dict:
     through, calibrates the joint and solves its angles and deflections (``OUT/joints``), compares
     the deflection with the truth, and writes ``OUT/summary.json``.
     """
-    from .io import read_csv_columns
+    from ..io import read_csv_columns
 
     out = Path(out)
     summary = run_simulate(default_scenario(), out / "pa10_joint2", duration_s=duration_s, concealment=False)
@@ -124,8 +126,8 @@ def run_simulate(scenario: str | Path, out: str | Path, duration_s: float | None
     `images`, also OUT/images/: board calibration views and a blob clip with their truth
     (the scenario's ``[images]`` table: ``views``, ``clip_frames``, ``board``).
     """
-    from .synth.record import record_scenario, write_scenario_bundle
-    from .synth.scenario import load_scenario
+    from ..synth.record import record_scenario, write_scenario_bundle
+    from ..synth.scenario import load_scenario
 
     scn = load_scenario(scenario)
     if duration_s is not None:
@@ -148,11 +150,11 @@ def run_simulate(scenario: str | Path, out: str | Path, duration_s: float | None
 
 def _write_images(scn, sr, out: Path) -> int:
     """Board views and a blob clip for a simulated recording; returns the number of images."""
-    from .io.calib import board_from_table
-    from .io.tomlio import require
-    from .synth.record import _layout, _rngs
-    from .synth.robot_mesh import pa10_geometry
-    from .synth.views import DEFAULT_BOARD, write_blob_clip, write_board_views
+    from ..io.calib import board_from_table
+    from ..io.tomlio import require
+    from ..synth.record import _layout, _rngs
+    from ..synth.robot_mesh import pa10_geometry
+    from ..synth.views import DEFAULT_BOARD, write_blob_clip, write_board_views
 
     tab = require(scn.source, scn.doc, "images", dict, default={})
     views = int(require(scn.source, tab, "views", int, "images", default=8))
@@ -182,7 +184,7 @@ def markers_in_parent_frame(v_link: np.ndarray, v_parent: np.ndarray | None
     (Kabsch) to its template; when it does not move (`STATIC_PARENT_SD_M`), one pose fitted over
     all frames is used so that it adds no per-frame noise.
     """
-    from .joints.segments import cluster_template, kabsch, to_parent_frame
+    from ..joints.segments import cluster_template, kabsch, to_parent_frame
 
     if v_parent is None:
         return v_link, None, True
@@ -211,7 +213,7 @@ def fit_sara_geometry(v: np.ndarray, labels) -> JointGeometry:
     its first complete frame. `cov_axis` and `cov_point` are NaN: judge the axis by refitting on
     parts of the trial.
     """
-    from .joints import cluster_template, fit_sara, kabsch, predict_markers
+    from ..joints import cluster_template, fit_sara, kabsch, predict_markers
 
     tmpl = cluster_template(v)
     R, t, _ = kabsch(tmpl, v)
@@ -260,7 +262,7 @@ def sara_angles(v: np.ndarray, geometry, t) -> JointAngles:
     The cluster (its template in the parent frame) is fitted to each frame (Kabsch); frames with
     fewer than 3 markers are NaN. sigma_q is sigma_m / sqrt(sum of r_p^2 over the markers seen).
     """
-    from .joints import kabsch, predict_markers
+    from ..joints import kabsch, predict_markers
 
     R, _, _ = kabsch(geometry.point + geometry.template, v)
     q = _twist(R, geometry.axis)
@@ -282,7 +284,7 @@ def calibrate_joint(v: np.ndarray, labels, t: np.ndarray, method: str = "ml"):
     Returns (JointGeometry, JointAngles). `method`: "ml" (maximum likelihood seeded by the
     bias-compensated fit), "halvorsen", "gamage_lasenby" or "sara" (`fit_sara_geometry`).
     """
-    from .joints.axis import fit_gamage_lasenby, fit_halvorsen, fit_hinge_ml
+    from ..joints.axis import fit_gamage_lasenby, fit_halvorsen, fit_hinge_ml
 
     if method == "gamage_lasenby":
         geometry = fit_gamage_lasenby(v, labels=labels)
@@ -305,7 +307,7 @@ also pronates), and the cluster's rotations locate the axis better than its mark
 
 def auto_calibrate_joint(v: np.ndarray, labels, t):
     """Maximum likelihood, or SARA where the markers do not move as a hinge (`HINGE_MISFIT_RATIO`)."""
-    from .joints import cluster_template, kabsch
+    from ..joints import cluster_template, kabsch
 
     geometry, angles = calibrate_joint(v, labels, t, "ml")
     _, _, rigid = kabsch(cluster_template(v), v)
@@ -317,7 +319,7 @@ def auto_calibrate_joint(v: np.ndarray, labels, t):
 
 def calibrate_joint_angles(v, geometry, t):
     """Angles of a joint with a given geometry (as `calibrate_joint` solves them for its method)."""
-    from .joints.angles import joint_angles
+    from ..joints.angles import joint_angles
 
     if geometry.method == "sara":
         return sara_angles(v, geometry, t)
@@ -339,9 +341,9 @@ def run_joints(recording: str | Path, out: str | Path, method: str = "auto") -> 
     likelihood, or by SARA where its markers do not move as a hinge (`auto_calibrate_joint`); or
     name one method for every joint.
     """
-    from .io import write_csv_columns
-    from .io.geometry import write_joint_geometry
-    from .joints.sync import deflection
+    from ..io import write_csv_columns
+    from ..io.geometry import write_joint_geometry
+    from ..joints.sync import deflection
 
     rec = load_recording(recording)
     out = Path(out)
@@ -406,8 +408,8 @@ def joint_signals(rec: Recording, angles_csv: str | Path, joint: int, min_valid:
     than `min_valid` of the frames with an angle, or a NaN in the controller log is refused with
     the time it happens: interpolation across it would invent the motion the identification fits.
     """
-    from .io import read_csv_columns
-    from .ident.twostep import controller_on
+    from ..io import read_csv_columns
+    from ..ident.twostep import controller_on
 
     spec, log = rec.joints[joint], rec.controller
     a = read_csv_columns(angles_csv)
@@ -439,331 +441,3 @@ def joint_signals(rec: Recording, angles_csv: str | Path, joint: int, min_valid:
     u = controller_on(t, log.t, log.tau[:, joint], log.rate_hz, cutoff)
     g = np.isfinite(q_m) & np.isfinite(u)
     return t[g], q[g], q_m[g], u[g], int((~ok).sum())
-
-
-IDENTIFY_METHODS = ("motor_first", "seed")
-
-
-def _spring_pairs(delta, tau_s, t, fs_hz: float, cutoff_hz: float = 10.0, rate_hz: float = 50.0):
-    """(delta, tau_s, t) for spring selection: both low-passed at `cutoff_hz` (mocap noise in
-    delta would otherwise hide a 10 % nonlinearity) and kept at `rate_hz` (nearly independent
-    samples; the hysteresis fits are 5x cheaper)."""
-    from .ident.conditioning import lowpass
-
-    stride = max(1, int(round(fs_hz / rate_hz)))
-    return lowpass(delta, fs_hz, cutoff_hz)[::stride], lowpass(tau_s, fs_hz, cutoff_hz)[::stride], t[::stride]
-
-
-def identify_signals(t, q, q_m, u, fs_hz: float, method: str = "motor_first", cutoff_hz: float | None = None,
-                     decimate: int = 2, spring_models=None) -> dict:
-    """Identify one joint from its signals on one clock (t, q, q_m, u: s, rad, rad, N m, link side).
-
-    Both formulations run: seed 000's two-step (eq. 5-7) and one-step (eq. 4) give the condition
-    numbers seed 000 compares and the one-step k; `method` chooses whose parameters are reported:
-    "motor_first" (default, :mod:`mocapfj.ident.motorfirst`, the one that resolves the link/motor
-    split through mocap) or "seed" (step 1 of eq. 6 with the spring of eq. 7). The spring model is
-    then selected by held-out error among `spring_models` (default all) on that method's
-    (deflection, spring torque) pairs. `cutoff_hz` is the seed method's low-pass (default 10 Hz);
-    motor-first uses its documented defaults. Returns a dict (see `run_identify`).
-    """
-    from .ident.motorfirst import identify_joint_motor_first
-    from .ident.springs import HYSTERETIC, SPRING_FITTERS, select_spring_model
-    from .ident.twostep import identify_joint
-
-    if method not in IDENTIFY_METHODS:
-        raise InputError(None, "method", f"one of {list(IDENTIFY_METHODS)}", repr(method))
-    seed = identify_joint(t, q, q_m, u, fs_hz=fs_hz, cutoff_hz=10.0 if cutoff_hz is None else cutoff_hz,
-                          decimate=decimate)
-    out = {"method": method, "cond_two_step": seed.cond_two_step, "cond_one_step": seed.cond_one_step,
-           "k_one_step": seed.one_step["k"], "seed_step1": seed.step1}
-    models = tuple(spring_models or SPRING_FITTERS)
-    if method == "seed":
-        values = {n: (seed.step1[n], seed.step1.std[i]) for i, n in enumerate(STEP1)}
-        values["k"] = (seed.spring["k"], seed.spring.std[0])
-        out.update(torque_rms=seed.torque_rms, q_zero_rad=seed.q_zero_rad)
-        ts, tau_s, delta = seed.t, seed.tau_s, seed.delta
-        spring = select_spring_model(delta, tau_s, ts, models=models)
-    else:
-        # a linear pass (which also tests the motor equation for a hysteretic spring); without
-        # hysteresis the spring model is selected on its pairs and, when it is not linear, the motor
-        # equation is solved again with that shape and the spring refitted on the new pairs
-        mf = identify_joint_motor_first(t, q, q_m, u, fs_hz=fs_hz, decimate=decimate)
-        if mf.hysteresis is not None:
-            spring = _hysteretic_spring(mf, fs_hz)
-        else:
-            spring = select_spring_model(*_spring_pairs(mf.delta, mf.tau_s, mf.t, fs_hz), models=tuple(m for m in models if m not in HYSTERETIC))
-            if spring.chosen.model != "linear":
-                mf = identify_joint_motor_first(t, q, q_m, u, fs_hz=fs_hz, decimate=decimate,
-                                                spring=spring.chosen.predict, q_zero_rad=mf.q_zero_rad)
-                spring = select_spring_model(*_spring_pairs(mf.delta, mf.tau_s, mf.t, fs_hz), models=(spring.chosen.model, "linear"))
-        values = {}
-        for n in (*STEP1, "k"):
-            part = mf.link if n in mf.link.names else mf.motor
-            values[n] = (part[n], float(part.std[part.names.index(n)]))
-        out.update(torque_rms=mf.motor.residual_rms, q_zero_rad=mf.q_zero_rad, cond_motor=mf.motor.cond,
-                   cond_link=mf.link.cond)
-    out["values"] = values
-    out["spring"] = spring if isinstance(spring, dict) else {
-        "model": spring.chosen.model, "params": {k: float(v) for k, v in spring.chosen.params.items()},
-        "r2": spring.r2, "holdout_rms_Nm": spring.holdout_rms}
-    return out
-
-
-def _hysteretic_spring(mf, fs_hz: float) -> dict:
-    """The Bouc-Wen spring the motor equation found, with its r2 on the spring pairs."""
-    from .ident.springs import bouc_wen_states
-
-    h = mf.hysteresis
-    d, tau, _ = _spring_pairs(mf.delta, mf.tau_s, mf.t, fs_hz)
-    pred = h["alpha"] * h["k"] * d + (1 - h["alpha"]) * h["k"] * bouc_wen_states(d, 1.0, h["beta"], h["gamma"])
-    r = tau - pred
-    r -= r.mean()                                             # the torque offset
-    dev = tau - tau.mean()
-    return {"model": "bouc_wen", "params": {n: h[n] for n in ("k", "alpha", "beta", "gamma")},
-            "r2": float(1 - (r @ r) / (dev @ dev)), "motor_rms_gain_pct": h["rms_gain_pct"]}
-
-
-def _urdf_chain(rec: Recording) -> bool:
-    """True when the recording has a URDF whose joints are exactly its joints, in order, and more
-    than one: then the links are identified together (`mocapfj.ident.nlink`)."""
-    if rec.urdf is None or len(rec.joints) < 2:
-        return False
-    from .ident.regressor import load_pin_model
-
-    return tuple(load_pin_model(rec.urdf).names[1:]) == tuple(j.name for j in rec.joints)
-
-
-def _identify_nlink(rec: Recording, out: Path, decimate: int) -> list[dict]:
-    """Motor equations per joint, then the links' base parameters through the URDF."""
-    from .ident.nlink import identify_nlink_motor_first
-    from .ident.springs import HYSTERETIC, SPRING_FITTERS, select_spring_model
-
-    sig = [joint_signals(rec, out / "joints" / f"{spec.name}.angles.csv", i) for i, spec in enumerate(rec.joints)]
-    n = min(s[0].size for s in sig)
-    t = sig[0][0][:n]
-    Q, Q_m, U = (np.column_stack([s[k][:n] for s in sig]) for k in (1, 2, 3))
-    fs = rec.markers.rate_hz
-    try:
-        res = identify_nlink_motor_first(rec.urdf, t, Q, Q_m, U, fs_hz=fs, decimate=decimate)
-    except InputError as e:
-        raise InputError(rec.root, f"n-link identification ({e.field})", e.expected, e.got, e.hint) from None
-    base = {name: (float(v), float(sd)) for name, v, sd in zip(res.base.names, res.base.values, res.base.std)}
-    results = []
-    for spec, m, s in zip(rec.joints, res.motors, sig):
-        if m.hysteresis is not None:
-            spring = {"model": "bouc_wen", "params": {k: m.hysteresis[k] for k in ("k", "alpha", "beta", "gamma")},
-                      "motor_rms_gain_pct": m.hysteresis["rms_gain_pct"]}
-        else:
-            inner = m.inner
-            sel = select_spring_model(*_spring_pairs(m.delta[inner], m.tau_s[inner], m.t[inner], fs),
-                                      models=tuple(k for k in SPRING_FITTERS if k not in HYSTERETIC))
-            spring = {"model": sel.chosen.model, "params": {k: float(v) for k, v in sel.chosen.params.items()},
-                      "r2": sel.r2, "holdout_rms_Nm": sel.holdout_rms}
-        results.append({
-            "name": spec.name, "recording": rec.name, "frames_filled": s[4], "method": "nlink_motor_first",
-            "values": {n_: (m.motor[n_], float(m.motor.std[m.motor.names.index(n_)])) for n_ in ("J", "b", "k")},
-            "torque_rms": m.motor.residual_rms, "cond_motor": m.motor.cond, "q_zero_rad": m.q_zero_rad,
-            "spring": spring, "nlink": {"base": base, "cond": res.base.cond, "torque_rms": res.base.residual_rms,
-                                        "r2": res.base.r2},
-        })
-    return results
-
-
-def identify_recording(recording: str | Path, out: str | Path, method: str = "motor_first",
-                       cutoff_hz: float | None = None, decimate: int = 2) -> list[dict]:
-    """Identify every joint of one recording.
-
-    Runs `run_joints` into OUT/joints and puts the link angle and the controller log on the mocap
-    samples (controller clock, `joint_signals`). A recording whose URDF holds exactly its joints
-    (more than one) is identified as one n-link robot (`mocapfj.ident.nlink`: each joint's motor
-    equation, then the links' base parameters); otherwise each joint alone (`identify_signals`).
-    Returns one dict per joint.
-    """
-    out = Path(out)
-    rec = load_recording(recording)
-    run_joints(recording, out / "joints")
-    if method == "motor_first" and _urdf_chain(rec):
-        return _identify_nlink(rec, out, decimate)
-    results = []
-    for i, spec in enumerate(rec.joints):
-        t, q, q_m, u, n_filled = joint_signals(rec, out / "joints" / f"{spec.name}.angles.csv", i)
-        try:
-            res = identify_signals(t, q, q_m, u, rec.markers.rate_hz, method, cutoff_hz, decimate)
-        except InputError as e:
-            raise InputError(rec.root, f"joints[{spec.name}] ({e.field})", e.expected, e.got, e.hint) from None
-        results.append({"name": spec.name, "recording": rec.name, "frames_filled": n_filled, **res})
-    return results
-
-
-def _param_table(trials: list[dict]) -> tuple[dict, dict | None]:
-    """Per parameter {value, std, rel_std_pct}: one trial's LS statistics, or the mean and SD over trials."""
-    names = [n for n in (*STEP1, "k") if all(n in t["values"] for t in trials)]
-    vals = np.array([[t["values"][n][0] for n in names] for t in trials])
-    if len(trials) == 1:
-        std = np.array([trials[0]["values"][n][1] for n in names])
-        cv = None
-    else:
-        std = vals.std(axis=0, ddof=1)
-        cv = {n: float(100 * s / abs(m)) if m else None for n, m, s in zip(names, vals.mean(0), std)}
-    mean = vals.mean(axis=0)
-    params = {n: {"value": float(m), "std": float(s), "rel_std_pct": float(100 * s / abs(m)) if m else None}
-              for n, m, s in zip(names, mean, std)}
-    return params, cv
-
-
-def _common_spring(trials: list[dict]) -> dict:
-    """The spring model most trials chose (the earliest on a tie), with the first such trial's fit
-    and how many trials chose it."""
-    models = [t["spring"]["model"] for t in trials]
-    best = max(dict.fromkeys(models), key=models.count)
-    return {**next(t["spring"] for t in trials if t["spring"]["model"] == best), "n_trials_chosen": models.count(best)}
-
-
-def run_identify(recordings, out: str | Path, method: str = "motor_first", cutoff_hz: float | None = None,
-                 decimate: int = 2) -> dict:
-    """``mocapfj identify``: identify every joint of one or more recordings; repeats give CV %.
-
-    Writes OUT/<recording>/ (joints output), OUT/identify.json, and a seed-000-Table-I-style table
-    OUT/table.md and OUT/table.csv (per joint: mean and, with repeats, CV % of I, c, v, mglx,
-    mgly, b, J, k and the torque RMS error).
-    """
-    from .io.atomic import write_text_atomic
-
-    out = Path(out)
-    per_joint: dict[str, list[dict]] = {}
-    for k, r in enumerate(recordings):
-        for res in identify_recording(r, out / f"{k:02d}_{Path(r).name}", method, cutoff_hz, decimate):
-            per_joint.setdefault(res["name"], []).append(res)
-    joints = []
-    for name, trials in per_joint.items():
-        params, cv = _param_table(trials)
-        j = {"name": name, "method": trials[0]["method"], "params": params}
-        for key in ("cond_two_step", "cond_one_step", "cond_motor", "cond_link", "torque_rms", "k_one_step"):
-            if all(key in t for t in trials):
-                j[key] = float(np.mean([t[key] for t in trials]))
-        j.update(spring=_common_spring(trials), n_trials=len(trials),
-                 frames_filled=int(sum(t["frames_filled"] for t in trials)))
-        if cv is not None:
-            j["cv_pct"] = cv
-        joints.append(j)
-    summary = {"recordings": [str(r) for r in recordings], "joints": joints}
-    first = next(iter(per_joint.values()), [])
-    if first and all("nlink" in t for t in first):   # the robot's base parameters, one set per recording
-        runs = [t["nlink"] for t in first]
-        names = list(runs[0]["base"])
-        vals = np.array([[r["base"][n][0] for n in names] for r in runs])
-        std = vals.std(axis=0, ddof=1) if len(runs) > 1 else np.array([runs[0]["base"][n][1] for n in names])
-        summary["nlink"] = {
-            "base_params": {n: {"value": float(v), "std": float(sd),
-                                "rel_std_pct": float(100 * sd / abs(v)) if v else None}
-                            for n, v, sd in zip(names, vals.mean(axis=0), std)},
-            "cond": float(np.mean([r["cond"] for r in runs])), "torque_rms": float(np.mean([r["torque_rms"] for r in runs])),
-            "r2": float(np.mean([r["r2"] for r in runs])), "n_trials": len(runs)}
-    write_json(out / "identify.json", summary)
-    # Table I of seed 000: columns I, c, v, mglx, mgly, b, J, k, error
-    cols = ["I", "c", "v", "mglx", "mgly", "b", "J", "k"]
-    units = ["kg m2", "N m", "N m s", "N m", "N m", "N m s", "kg m2", "N m/rad"]
-    lines = ["| joint | statistic | " + " | ".join(f"{c} ({u})" for c, u in zip(cols, units)) + " | error (N m) |",
-             "|" + "---|" * (len(cols) + 3)]
-    csv_lines = ["joint,statistic," + ",".join(cols) + ",error"]
-    for j in joints:
-        p = j["params"]
-        rows = [("mean", [p[c]["value"] if c in p else None for c in cols], j["torque_rms"])]
-        rows.append(("CV (%)", [j["cv_pct"].get(c) for c in cols], None) if "cv_pct" in j
-                    else ("rel. std (%)", [p[c]["rel_std_pct"] if c in p else None for c in cols], None))
-        for stat, vals, err in rows:
-            lines.append(f"| {j['name']} | {stat} | " + " | ".join("-" if v is None else f"{v:.4g}" for v in vals)
-                         + f" | {'' if err is None else f'{err:.3g}'} |")
-            csv_lines.append(",".join([j["name"], stat] + ["nan" if v is None else repr(float(v)) for v in vals]
-                                      + ["" if err is None else repr(float(err))]))
-    write_text_atomic(out / "table.md", "\n".join(lines) + "\n")
-    write_text_atomic(out / "table.csv", "\n".join(csv_lines) + "\n")
-    return summary
-
-
-def _discovery_signals(recording, out: Path) -> tuple[Recording, dict]:
-    """run_joints, then every joint's signals on the mocap samples (common span)."""
-    from .discover import JointSignals
-
-    rec = load_recording(recording)
-    run_joints(recording, out)
-    sig = {spec.name: joint_signals(rec, out / f"{spec.name}.angles.csv", i) for i, spec in enumerate(rec.joints)}
-    n = min(s[0].size for s in sig.values())
-    return rec, {name: JointSignals(s[0][:n], s[1][:n], s[2][:n], s[3][:n]) for name, s in sig.items()}
-
-
-def _identified_models(rec: Recording, signals: dict) -> dict:
-    """The nominal model of each joint identified on the spot (motor-first: linear spring,
-    Coulomb + viscous friction, gravity; the spring's zero is the recording's)."""
-    from .discover import JointModel
-    from .dynamics import CoulombViscous, LinearSpring
-
-    models = {}
-    for spec in rec.joints:
-        s = signals[spec.name]
-        res = identify_signals(s.t, s.q, s.q_m, s.u, rec.markers.rate_hz, spring_models=("linear",))
-        v = {n: res["values"][n][0] for n in res["values"]}
-        models[spec.name] = JointModel(name=spec.name, gear_ratio=spec.gear_ratio, I=v["I"], J=v["J"], mglx=v["mglx"],
-                                       mgly=v["mgly"], b=v["b"], friction=CoulombViscous(c=v["c"], v=v["v"]),
-                                       spring=LinearSpring(k=v["k"]))
-    return models
-
-
-def _verdict(d) -> str:
-    """One line: the effects found, and any mismatch the library leaves unexplained."""
-    left = [f"{j} ({fam} residual {r[f'{fam}_rms_Nm']:.3g} N m RMS)" for j, r in d.remaining.items()
-            for fam in ("spring", "link") if r[f"{fam}_unexplained"]]
-    found = ", ".join(f"{e['name']} ({e['joint']})" for e in d.effects)
-    if not d.effects and not left:
-        return "no missing physics found"
-    if not left:
-        return f"missing physics: {found}"
-    tail = "a mismatch no effect of the library explains remains on " + ", ".join(left) + " (see location)"
-    return f"missing physics: {found}; {tail}" if d.effects else f"no effect of the library found; {tail}"
-
-
-def run_discover(recording, out: str | Path, model: str | Path | None = None, validation=None) -> dict:
-    """``mocapfj discover``: what the model misses in the recording (:mod:`mocapfj.discover`).
-
-    The model: a model file (or a scenario file, read without its effects), else each joint
-    identified on the spot (`identify_signals`, linear spring). Writes OUT/joints (and
-    OUT/validation_joints), OUT/discovery.json, the augmented model OUT/model.toml and the
-    before/after residuals OUT/residuals.csv (t, and per joint r_delta_before/after rad, r_u_before/after N m).
-    """
-    from .discover import discover, read_model_file, write_model_file
-    from .io import write_csv_columns
-
-    out = Path(out)
-    if validation is not None:
-        load_recording(validation)                  # refuse a bad validation bundle before the long work
-    if model is not None:
-        read_model_file(model)
-    rec, signals = _discovery_signals(recording, out / "joints")
-    if model is not None:
-        models = read_model_file(model)
-        missing = [n for n in signals if n not in models]
-        if missing:
-            raise InputError(model, "joints", f"a model of every joint of the recording {list(signals)}",
-                             f"none for {missing}")
-        models = {n: models[n] for n in signals}
-    else:
-        models = _identified_models(rec, signals)
-    val = None
-    if validation is not None:
-        _, val = _discovery_signals(validation, out / "validation_joints")
-    d = discover(signals, models, fs_hz=rec.markers.rate_hz, validation=val)
-    summary = {"recording": str(recording), "model": str(model) if model is not None else "identified",
-               "effects": d.effects, "fit_before": d.fit_before, "fit_after": d.fit_after, "fits": d.fits,
-               "location": d.location, "validation": d.validation, "stopped": d.stopped, "remaining": d.remaining,
-               "verdict": _verdict(d)}
-    write_json(out / "discovery.json", summary)
-    write_model_file(out / "model.toml", d.models.values(),
-                     [{k: e[k] for k in ("name", "joint", "parameters", "p_value")} for e in d.effects])
-    cols = {}
-    for name, r in d.residuals.items():
-        cols.setdefault("t", r["t"])
-        for key in ("r_delta_before", "r_delta_after", "r_u_before", "r_u_after"):
-            cols[f"{name}_{key}"] = r[key]
-    if cols:
-        write_csv_columns(out / "residuals.csv", cols)
-    return summary
