@@ -22,7 +22,7 @@ from scipy.optimize import minimize, minimize_scalar
 from ..dynamics import (AsymmetricCoulombViscous, Backlash, BoucWen, CoulombViscous, LinearSpring,
                         PositionDependent, PositionTorque, Stribeck, TransmissionError, shift_signal)
 from ..ident.conditioning import lowpass
-from ..ident.springs import bouc_wen_states
+from ..ident.springs import bouc_wen_path
 from .residuals import LINK_HZ, Families
 
 __all__ = ["EFFECTS", "Candidate", "SPRING_EFFECTS", "LINK_EFFECTS"]
@@ -74,11 +74,9 @@ def hysteresis(fam: Families, mask, others) -> Candidate | None:
     y, k = fam.r_s, fam.k
     span = float(np.ptp(fam.d_hat[fam.keep_s]))
     stride = max(1, int(fam.fs_hz // 100))
-    ds = fam.d_hat[::stride]
-    idx = np.arange(fam.t.size) / stride
 
     def cols(x):
-        z = np.interp(idx, np.arange(ds.size), bouc_wen_states(ds, 1.0, np.exp(x[0]), np.exp(x[1])))
+        z = bouc_wen_path(fam.d_hat, 1.0, np.exp(x[0]), np.exp(x[1]), stride)
         return [fam.lp(fam.d_hat), fam.lp(z), np.ones_like(y)]
 
     def rss(x):

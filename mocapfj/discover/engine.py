@@ -239,14 +239,10 @@ def _remaining(fam: Families, signals: JointSignals) -> dict:
     filters; the link residual has no such floor (its angle is rebuilt without the mocap noise),
     so it is compared with 10 % of the motor torque's spread. A residual above twice its floor, or
     above those 10 %, is a mismatch the library does not explain."""
-    from ..ident.motorfirst import white_noise_sd
+    from ..ident.conditioning import noise_gain, white_noise_sd
     from .residuals import LINK_HZ, RESIDUAL_HZ
 
-    n = 4001
-    x = np.zeros(n)
-    x[n // 2] = 1.0
-    h = lowpass(lowpass(x, fam.fs_hz, LINK_HZ), fam.fs_hz, RESIDUAL_HZ)
-    floor = fam.k * white_noise_sd(signals.q, fam.fs_hz) * float(np.sqrt(h @ h))
+    floor = fam.k * white_noise_sd(signals.q, fam.fs_hz) * float(np.sqrt(noise_gain(fam.fs_hz, LINK_HZ, RESIDUAL_HZ)))
     rs = float(np.sqrt(np.mean(fam.r_s[fam.keep_s] ** 2)))
     rl = float(np.sqrt(np.mean(fam.r_l[fam.keep_l] ** 2)))
     spread = float(np.std(fam.u[fam.keep_s]))

@@ -23,8 +23,8 @@ from scipy.optimize import minimize_scalar
 
 from ..dynamics import BoucWen, LinearSpring, shift_signal
 from ..errors import InputError
-from ..ident.conditioning import derivatives, lowpass
-from ..ident.springs import bouc_wen_states
+from ..ident.conditioning import complementary, derivatives, lowpass
+from ..ident.springs import bouc_wen_path
 from .model import JointModel
 
 __all__ = ["Families", "families", "spring_torque_of", "RESIDUAL_HZ"]
@@ -38,12 +38,11 @@ def spring_torque_of(model: JointModel, delta: np.ndarray, t: np.ndarray) -> np.
     """The model spring's torque along the deflection path delta (T,) rad at t (T,) s, N m.
 
     A Bouc-Wen spring with n = 1 runs along the path exactly (linear between samples, at most
-    100 Hz: `ident.springs.bouc_wen_states`); other hysteretic springs by their own `run`."""
+    100 Hz: `ident.springs.bouc_wen_path`); other hysteretic springs by their own `run`."""
     sp = model.spring
     if isinstance(sp, BoucWen) and sp.n == 1.0:
         step = max(1, int(round(1.0 / (100.0 * float(np.median(np.diff(t)))))))
-        idx = np.arange(delta.size) / step
-        z = np.interp(idx, np.arange(delta[::step].size), bouc_wen_states(delta[::step], sp.A, sp.beta, sp.gamma))
+        z = bouc_wen_path(delta, sp.A, sp.beta, sp.gamma, step)
         return sp.alpha * sp.k * delta + (1 - sp.alpha) * sp.k * z
     if getattr(sp, "n_states", 0):
         return np.asarray(sp.run(delta, t), dtype=np.float64)
@@ -137,7 +136,7 @@ def families(model: JointModel, t, q, q_m, u, *, fs_hz: float, others_qdd: dict 
         e = float(np.mean(tau_s[inner]) / model.spring.k - np.mean(delta[inner]) + model.spring.offset)
     r_s_full = tau_s - spring_torque_of(model, delta + e, t)
     d_lin = tau_s / k
-    d_hat = lowpass(delta + e, fs_hz, SPLIT_HZ) + d_lin - lowpass(d_lin, fs_hz, SPLIT_HZ)
+    d_hat = complementary(delta + e, d_lin, fs_hz, SPLIT_HZ)
     q_hat = qmf - d_hat
     qd, qdd = derivatives(q_hat, fs_hz)
     link = _link_torque(model, q_hat, qd, qdd)

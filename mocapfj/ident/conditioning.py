@@ -10,7 +10,8 @@ from scipy import signal
 
 from ..errors import InputError
 
-__all__ = ["lowpass", "derivatives", "decimate_parallel", "resample_to"]
+__all__ = ["lowpass", "derivatives", "decimate_parallel", "resample_to", "complementary", "white_noise_sd",
+           "noise_gain"]
 
 
 def _check_rate(fs_hz: float, cutoff_hz: float, what: str) -> None:
@@ -77,3 +78,30 @@ def resample_to(t_from: np.ndarray, x: np.ndarray, t_to: np.ndarray) -> np.ndarr
     flat = x.reshape(x.shape[0], -1)
     out = np.column_stack([np.interp(t_to, t_from, flat[:, k], left=np.nan, right=np.nan) for k in range(flat.shape[1])])
     return out.reshape((len(t_to),) + x.shape[1:])
+
+
+def complementary(low: np.ndarray, high: np.ndarray, fs_hz: float, split_hz: float) -> np.ndarray:
+    """A complementary split: `low` below `split_hz` and `high` above it, L(low) + high - L(high)
+    with L the zero-phase low-pass (e.g. a deflection from mocap below and from the spring above)."""
+    return lowpass(low, fs_hz, split_hz) + high - lowpass(high, fs_hz, split_hz)
+
+
+def white_noise_sd(x: np.ndarray, fs_hz: float) -> float:
+    """SD of the white measurement noise on x (T,), from the mean periodogram above fs/4 (where
+    a joint's motion has no power at mocap rates): E|X_f|^2 / T = sigma^2 for white noise."""
+    x = np.asarray(x, dtype=np.float64)
+    f = np.fft.rfftfreq(x.size, 1.0 / fs_hz)
+    P = np.abs(np.fft.rfft(x - x.mean())) ** 2 / x.size
+    band = (f > fs_hz / 4) & (f < 0.98 * fs_hz / 2)
+    return float(np.sqrt(P[band].mean())) if band.any() else 0.0
+
+
+def noise_gain(fs_hz: float, *cutoffs_hz: float) -> float:
+    """Variance gain of white noise through zero-phase low-passes in cascade (sum of the squared
+    impulse response): the noise variance after them is sigma^2 times this."""
+    n = int(40 * fs_hz / min(cutoffs_hz)) | 1
+    h = np.zeros(n)
+    h[n // 2] = 1.0
+    for fc in cutoffs_hz:
+        h = lowpass(h, fs_hz, fc)
+    return float(h @ h)

@@ -40,7 +40,7 @@ import numpy as np
 
 from ..errors import InputError
 from ..types import LSResult
-from .conditioning import decimate_parallel, derivatives, lowpass
+from .conditioning import complementary, decimate_parallel, derivatives, lowpass, noise_gain, white_noise_sd
 from .ls import ls_fit
 from .twostep import _check_inputs
 
@@ -133,7 +133,7 @@ def motor_stage(t, q, q_m, u, *, fs_hz: float, cutoff_hz: float = 5.0, link_cuto
         # errors in variables: the mocap noise in the deflection column attenuates k, and J and b
         # (nearly collinear with it) take up the difference; remove the noise's share of W^T W
         fc2 = min(cutoff_hz, 0.8 * fs_hz / (2 * decimate)) if decimate > 1 else None
-        var = white_noise_sd(q, fs_hz) ** 2 * _noise_gain2(fs_hz, cutoff_hz, fc2)
+        var = white_noise_sd(q, fs_hz) ** 2 * (noise_gain(fs_hz, cutoff_hz, fc2) if fc2 else noise_gain(fs_hz, cutoff_hz))
         motor = _compensated(Wm, ym, motor, 2, var)
     if spring is not None:   # report k as the scale times the shape's mean slope (the linear equivalent)
         slope = float(np.polyfit(delta[inner], f_spring[inner], 1)[0])
@@ -155,7 +155,7 @@ def motor_stage(t, q, q_m, u, *, fs_hz: float, cutoff_hz: float = 5.0, link_cuto
         """Spring torque from the motor side; deflection by the complementary split."""
         tau_s = uf - J * qmdd - b * qmd
         d_lin = (tau_s - tau0) / k
-        return tau_s, lowpass(d_mocap, fs_hz, split_hz) + d_lin - lowpass(d_lin, fs_hz, split_hz)
+        return tau_s, complementary(d_mocap, d_lin, fs_hz, split_hz)
 
     tau_s, d_hat = rebuilt(J, b, k, tau0)
     hyst = None
@@ -233,28 +233,6 @@ def identify_joint_motor_first(t, q, q_m, u, *, fs_hz: float, cutoff_hz: float =
                             delta=st.delta[inner], hysteresis=st.hysteresis)
 
 
-def white_noise_sd(x: np.ndarray, fs_hz: float) -> float:
-    """SD of the white measurement noise on x (T,), from the mean periodogram above fs/4 (where
-    a joint's motion has no power at mocap rates): E|X_f|^2 / T = sigma^2 for white noise."""
-    x = np.asarray(x, dtype=np.float64)
-    f = np.fft.rfftfreq(x.size, 1.0 / fs_hz)
-    P = np.abs(np.fft.rfft(x - x.mean())) ** 2 / x.size
-    band = (f > fs_hz / 4) & (f < 0.98 * fs_hz / 2)
-    return float(np.sqrt(P[band].mean())) if band.any() else 0.0
-
-
-def _noise_gain2(fs_hz: float, cutoff_hz: float, fc2: float | None) -> float:
-    """Variance gain of white noise through the motor equation's zero-phase low-passes: `cutoff_hz`,
-    then (with decimation) decimate_parallel's at `fc2` (None: no decimation)."""
-    n = int(40 * fs_hz / min(cutoff_hz, fc2 or cutoff_hz)) | 1
-    x = np.zeros(n)
-    x[n // 2] = 1.0
-    h = lowpass(x, fs_hz, cutoff_hz)
-    if fc2 is not None:
-        h = lowpass(h, fs_hz, fc2)
-    return float(h @ h)
-
-
 def _compensated(W: np.ndarray, y: np.ndarray, ls: LSResult, col: int, var: float) -> LSResult:
     """Least squares with the noise variance `var` of column `col` taken out of W^T W (bias-
     compensated LS for errors in variables); statistics as ls_fit's with the new solution."""
@@ -285,16 +263,14 @@ def _hysteretic_motor(W, u_c, d_hat, inner, fs_hz, cutoff_hz, decimate, linear: 
     """
     from scipy.optimize import minimize
 
-    from .springs import bouc_wen_states
+    from .springs import bouc_wen_path
 
     stride = max(1, int(fs_hz // (8 * cutoff_hz)))       # z along d_hat at >= 8x the cut-off
-    ds = d_hat[::stride]
-    idx = np.arange(d_hat.size) / stride
     fc2 = min(cutoff_hz, 0.8 * fs_hz / (2 * decimate))
     names = ("J", "b", "k_lin", "tau0", "k_hyst")
 
     def solve(x):
-        z = np.interp(idx, np.arange(ds.size), bouc_wen_states(ds, 1.0, np.exp(x[0]), np.exp(x[1])))
+        z = bouc_wen_path(d_hat, 1.0, np.exp(x[0]), np.exp(x[1]), stride)
         Wz = np.column_stack([W, lowpass(z, fs_hz, cutoff_hz)])[inner]
         Wd, yd = decimate_parallel(Wz, u_c[inner], decimate, fs_hz, fc2)
         return ls_fit(Wd, yd, names)
