@@ -95,7 +95,8 @@ def chain_case(T: int = 50_000, n_peer: int = 200) -> dict:
 # ==================================================================================================
 def single_joint_case(T: int = 1_000_000, n_peer: int = 1000) -> dict | None:
     try:
-        from mocapfj.joints.angles import joint_angles, rotate
+        from mocapfj.joints.angles import joint_angles
+        from mocapfj.rotations import matrix_from_axis_angle as rotate
         from mocapfj.types import JointGeometry
     except ImportError:
         return None

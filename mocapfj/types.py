@@ -2,8 +2,10 @@
 
 Arrays are fields; shapes and units are in each docstring and follow docs/conventions.md:
 SI units, time axis first, NaN for a missing sample. The constructors check shapes once so that
-the code inside the package can trust them. Dataclasses compare by identity (``eq=False``)
-because their fields are arrays; tests compare fields with numpy.
+the code inside the package can trust them: every constructor checks its arrays' shapes (named
+sizes agree across fields) with the ``check_*`` validators of :mod:`mocapfj.validate` and stores
+read-only copies. Dataclasses compare by identity (``eq=False``) because their fields are arrays;
+tests compare fields with numpy.
 """
 
 from __future__ import annotations
@@ -15,6 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from .errors import InputError
+from .validate import check_array, check_int, check_scalar, freeze
 
 __all__ = [
     "MarkerTrajectories",
@@ -29,24 +32,12 @@ __all__ = [
     "JointAngles",
     "Deflection",
     "LSResult",
+    "JointSignals",
     "WORLD",
 ]
 
 WORLD = "world"
 """`JointSpec.parent_markers` value for a joint whose parent link does not move."""
-
-
-def _f64(x, shape_desc: str, name: str, ndim: int | None = None) -> np.ndarray:
-    a = np.asarray(x, dtype=np.float64)
-    if ndim is not None and a.ndim != ndim:
-        raise InputError(None, name, f"an array of shape {shape_desc}", f"shape {a.shape}")
-    return a
-
-
-def _freeze(a: np.ndarray) -> np.ndarray:
-    a = np.array(a, copy=True)
-    a.setflags(write=False)
-    return a
 
 
 @dataclass(frozen=True, eq=False)
@@ -75,27 +66,19 @@ class MarkerTrajectories:
     residual: np.ndarray | None = None
 
     def __post_init__(self) -> None:
-        t = _f64(self.t, "(T,)", "t", 1)
-        xyz = _f64(self.xyz, "(T, M, 3)", "xyz", 3)
         labels = tuple(str(s) for s in self.labels)
-        if xyz.shape[0] != t.shape[0] or xyz.shape[2] != 3 or xyz.shape[1] != len(labels):
-            raise InputError(
-                None, "xyz", f"shape (T={t.shape[0]}, M={len(labels)}, 3)", f"shape {xyz.shape}"
-            )
+        dims = {"M": len(labels)}
+        t = check_array(self.t, "t", ("T",), dims=dims)
+        xyz = check_array(self.xyz, "xyz", ("T", "M", 3), dims=dims)
         if len(set(labels)) != len(labels):
             dup = sorted({s for s in labels if labels.count(s) > 1})
             raise InputError(None, "labels", "unique marker labels", f"duplicates {dup}")
-        if not (np.isfinite(self.rate_hz) and self.rate_hz > 0):
-            raise InputError(None, "rate_hz", "a positive rate in Hz", self.rate_hz)
-        object.__setattr__(self, "t", _freeze(t))
-        object.__setattr__(self, "xyz", _freeze(xyz))
+        object.__setattr__(self, "t", freeze(t))
+        object.__setattr__(self, "xyz", freeze(xyz))
         object.__setattr__(self, "labels", labels)
-        object.__setattr__(self, "rate_hz", float(self.rate_hz))
+        object.__setattr__(self, "rate_hz", check_scalar(self.rate_hz, "rate_hz", positive=True))
         if self.residual is not None:
-            r = _f64(self.residual, "(T, M)", "residual", 2)
-            if r.shape != xyz.shape[:2]:
-                raise InputError(None, "residual", f"shape {xyz.shape[:2]}", f"shape {r.shape}")
-            object.__setattr__(self, "residual", _freeze(r))
+            object.__setattr__(self, "residual", freeze(check_array(self.residual, "residual", ("T", "M"), dims=dims)))
 
     @property
     def n_frames(self) -> int:
@@ -137,23 +120,15 @@ class ControllerLog:
     extra: Mapping[str, np.ndarray] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
-        t = _f64(self.t, "(T,)", "t", 1)
         names = tuple(str(s) for s in self.joint_names)
-        shape = (t.shape[0], len(names))
-        q_m = _f64(self.q_m, "(T, J)", "q_m")
-        tau = _f64(self.tau, "(T, J)", "tau")
-        for name, a in (("q_m", q_m), ("tau", tau)):
-            if a.shape != shape:
-                raise InputError(None, name, f"shape {shape}", f"shape {a.shape}")
-        extra = {}
-        for k, v in dict(self.extra).items():
-            v = _f64(v, "(T,)", f"extra[{k!r}]", 1)
-            if v.shape[0] != t.shape[0]:
-                raise InputError(None, f"extra[{k!r}]", f"{t.shape[0]} samples", v.shape[0])
-            extra[str(k)] = _freeze(v)
-        object.__setattr__(self, "t", _freeze(t))
-        object.__setattr__(self, "q_m", _freeze(q_m))
-        object.__setattr__(self, "tau", _freeze(tau))
+        dims = {"J": len(names)}
+        t = check_array(self.t, "t", ("T",), dims=dims)
+        q_m = check_array(self.q_m, "q_m", ("T", "J"), dims=dims)
+        tau = check_array(self.tau, "tau", ("T", "J"), dims=dims)
+        extra = {str(k): freeze(check_array(v, f"extra[{k!r}]", ("T",), dims=dims)) for k, v in dict(self.extra).items()}
+        object.__setattr__(self, "t", freeze(t))
+        object.__setattr__(self, "q_m", freeze(q_m))
+        object.__setattr__(self, "tau", freeze(tau))
         object.__setattr__(self, "joint_names", names)
         object.__setattr__(self, "extra", extra)
 
@@ -175,11 +150,13 @@ class JointSpec:
     ----------
     name : str
     motor_position, motor_torque : str
-        Controller CSV columns: motor angle / gear ratio (rad) and motor torque x gear ratio (N m).
+        Controller CSV columns: motor angle / gear ratio (rad) and motor torque x gear ratio (N m);
+        empty for a joint without a motor log (a passive hinge, a human joint).
     gear_ratio : float
         Informative: the logged columns are already on the link side.
     link_markers : tuple of str
-        Labels of the markers on the link this joint moves.
+        Labels of the markers on the link this joint moves; empty for a joint known only from the
+        controller log (a rigid robot identified from its log and URDF).
     parent_markers : tuple of str, or the string ``"world"``
         Labels of the markers on the parent link, or ``"world"`` when the parent does not move.
     extra : mapping
@@ -195,15 +172,30 @@ class JointSpec:
     extra: Mapping[str, object] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "link_markers", tuple(self.link_markers))
-        if not isinstance(self.parent_markers, str):
-            object.__setattr__(self, "parent_markers", tuple(self.parent_markers))
-        object.__setattr__(self, "gear_ratio", float(self.gear_ratio))
+        object.__setattr__(self, "link_markers", tuple(str(s) for s in self.link_markers))
+        if isinstance(self.parent_markers, str):
+            if self.parent_markers != WORLD:
+                raise InputError(None, f"joints[{self.name}].parent_markers", f'marker labels or "{WORLD}"',
+                                 repr(self.parent_markers))
+        else:
+            object.__setattr__(self, "parent_markers", tuple(str(s) for s in self.parent_markers))
+        object.__setattr__(self, "gear_ratio", check_scalar(self.gear_ratio, f"joints[{self.name}].gear_ratio",
+                                                            positive=True))
         object.__setattr__(self, "extra", dict(self.extra))
 
     @property
     def parent_is_world(self) -> bool:
         return isinstance(self.parent_markers, str)
+
+    @property
+    def has_markers(self) -> bool:
+        """The joint's link carries markers (False in a rigid-robot bundle: controller log only)."""
+        return bool(self.link_markers)
+
+    @property
+    def has_motor(self) -> bool:
+        """The controller log has this joint's motor columns (False for a passive hinge)."""
+        return bool(self.motor_position) and bool(self.motor_torque)
 
 
 @dataclass(frozen=True, eq=False)
@@ -228,16 +220,12 @@ class Detections:
     point_id: np.ndarray
 
     def __post_init__(self) -> None:
-        xy = _f64(self.xy_px, "(N, 2)", "xy_px", 2)
-        n = xy.shape[0]
-        if xy.shape[1] != 2:
-            raise InputError(None, "xy_px", "shape (N, 2)", f"shape {xy.shape}")
+        dims = {}
+        xy = check_array(self.xy_px, "xy_px", ("N", 2), dims=dims)
         for name in ("frame", "camera", "point_id"):
-            a = np.asarray(getattr(self, name))
-            if a.shape != (n,):
-                raise InputError(None, name, f"shape ({n},)", f"shape {a.shape}")
-            object.__setattr__(self, name, _freeze(a.astype(np.int64)))
-        object.__setattr__(self, "xy_px", _freeze(xy))
+            a = check_array(getattr(self, name), name, ("N",), dims=dims, dtype=np.int64)
+            object.__setattr__(self, name, freeze(a))
+        object.__setattr__(self, "xy_px", freeze(xy))
 
 
 @dataclass(frozen=True, eq=False)
@@ -268,11 +256,9 @@ class Camera:
 
     def __post_init__(self) -> None:
         for name, shape in (("K", (3, 3)), ("R_cam_world", (3, 3)), ("t_cam_world", (3,))):
-            a = np.asarray(getattr(self, name), dtype=np.float64)
-            if a.shape != shape:
-                raise InputError(None, f"camera {self.name!r} {name}", f"shape {shape}", f"shape {a.shape}")
-            object.__setattr__(self, name, _freeze(a))
-        object.__setattr__(self, "dist", _freeze(np.asarray(self.dist, dtype=np.float64).ravel()))
+            object.__setattr__(self, name, freeze(check_array(getattr(self, name), f"camera {self.name!r} {name}",
+                                                              shape, finite=True)))
+        object.__setattr__(self, "dist", freeze(check_array(self.dist, f"camera {self.name!r} dist", finite=True).ravel()))
         object.__setattr__(self, "size", (int(self.size[0]), int(self.size[1])))
 
 
@@ -340,10 +326,11 @@ class Recording:
     Attributes
     ----------
     name : str
-    markers : MarkerTrajectories
-        On the mocap clock.
-    controller : ControllerLog
-        On the controller clock: t_controller = t_mocap + clock_offset_s.
+    markers : MarkerTrajectories or None
+        On the mocap clock; None for a rigid robot known from its controller log and URDF only.
+    controller : ControllerLog or None
+        On the controller clock: t_controller = t_mocap + clock_offset_s; None for markers only
+        (a passive hinge or a human joint: axes and angles, no deflection).
     joints : tuple of JointSpec
     clock_offset_s : float
         Declared offset between the clocks (hardware sync); 0 when not declared.
@@ -363,8 +350,8 @@ class Recording:
     """
 
     name: str
-    markers: MarkerTrajectories
-    controller: ControllerLog
+    markers: MarkerTrajectories | None
+    controller: ControllerLog | None
     joints: tuple[JointSpec, ...]
     clock_offset_s: float = 0.0
     marker_file: str = "markers.c3d"
@@ -376,14 +363,27 @@ class Recording:
     root: Path | None = None
     spec: Mapping[str, object] = field(default_factory=dict)
 
+    def __post_init__(self) -> None:
+        if self.markers is None and self.controller is None:
+            raise InputError(self.root, "recording", "a marker file, a controller log or both", "neither")
+        object.__setattr__(self, "joints", tuple(self.joints))
+        object.__setattr__(self, "clock_offset_s", check_scalar(self.clock_offset_s, "markers.clock_offset_s",
+                                                                file=self.root))
+
     def joint(self, name: str) -> JointSpec:
         for j in self.joints:
             if j.name == name:
                 return j
         raise InputError(self.root, "joints", f"one of {[j.name for j in self.joints]}", repr(name))
 
+    def joint_index(self, name: str) -> int:
+        """Position of joint `name` in `joints` (and in the controller log's columns)."""
+        return self.joints.index(self.joint(name))
+
     def markers_t_controller(self) -> np.ndarray:
         """Mocap sample times on the controller clock, (T,) s."""
+        if self.markers is None:
+            raise InputError(self.root, "markers", "a recording with a marker file", "none")
         return self.markers.t + self.clock_offset_s
 
 
@@ -438,13 +438,18 @@ class JointGeometry:
     n_frames: int
 
     def __post_init__(self) -> None:
-        for name in ("axis", "point", "template", "radii", "radius_rms", "cov_axis", "cov_point"):
-            object.__setattr__(self, name, _freeze(np.asarray(getattr(self, name), dtype=np.float64)))
-        object.__setattr__(self, "labels", tuple(self.labels))
-        P = len(self.labels)
-        if self.axis.shape != (3,) or self.point.shape != (3,) or self.template.shape != (P, 3):
-            raise InputError(None, "JointGeometry", f"axis (3,), point (3,), template ({P}, 3)",
-                             f"{self.axis.shape}, {self.point.shape}, {self.template.shape}")
+        labels = tuple(str(s) for s in self.labels)
+        dims = {"P": len(labels)}
+        for name, shape in (("axis", (3,)), ("point", (3,)), ("template", ("P", 3)), ("radii", ("P",)),
+                            ("radius_rms", ("P",)), ("cov_axis", (3, 3)), ("cov_point", (3, 3))):
+            object.__setattr__(self, name, freeze(check_array(getattr(self, name), f"JointGeometry.{name}", shape,
+                                                              dims=dims)))
+        object.__setattr__(self, "labels", labels)
+        object.__setattr__(self, "marker_rms", check_scalar(self.marker_rms, "JointGeometry.marker_rms", nonneg=True,
+                                                            allow_nan=True))
+        object.__setattr__(self, "sigma_m", check_scalar(self.sigma_m, "JointGeometry.sigma_m", nonneg=True,
+                                                         allow_nan=True))
+        object.__setattr__(self, "n_frames", check_int(self.n_frames, "JointGeometry.n_frames", lo=0))
 
 
 @dataclass(frozen=True, eq=False)
@@ -473,6 +478,15 @@ class JointAngles:
     marker_rms: np.ndarray
     n_markers: np.ndarray
     n_rejected: np.ndarray
+
+    def __post_init__(self) -> None:
+        dims = {}
+        for name in ("t", "q", "sigma_q", "marker_rms"):
+            object.__setattr__(self, name, freeze(check_array(getattr(self, name), f"JointAngles.{name}", ("T",),
+                                                              dims=dims)))
+        for name in ("n_markers", "n_rejected"):
+            object.__setattr__(self, name, freeze(check_array(getattr(self, name), f"JointAngles.{name}", ("T",),
+                                                              dims=dims, dtype=np.int64)))
 
     @property
     def n_invalid(self) -> int:
@@ -513,6 +527,15 @@ class Deflection:
     tau: np.ndarray
     q_offset_rad: float
     q_m_quantum_rad: float
+
+    def __post_init__(self) -> None:
+        dims = {}
+        for name in ("t", "q", "q_m", "delta", "sigma_delta", "tau"):
+            object.__setattr__(self, name, freeze(check_array(getattr(self, name), f"Deflection.{name}", ("T",),
+                                                              dims=dims)))
+        object.__setattr__(self, "q_offset_rad", check_scalar(self.q_offset_rad, "Deflection.q_offset_rad"))
+        object.__setattr__(self, "q_m_quantum_rad", check_scalar(self.q_m_quantum_rad, "Deflection.q_m_quantum_rad",
+                                                                 nonneg=True))
 
 
 @dataclass(frozen=True, eq=False)
@@ -555,5 +578,69 @@ class LSResult:
     n_samples: int
     unidentifiable: tuple[str, ...] = ()
 
+    def __post_init__(self) -> None:
+        names = tuple(str(n) for n in self.names)
+        dims = {"p": len(names)}
+        for name, shape in (("values", ("p",)), ("std", ("p",)), ("rel_std_pct", ("p",)), ("cov", ("p", "p"))):
+            object.__setattr__(self, name, freeze(check_array(getattr(self, name), f"LSResult.{name}", shape,
+                                                              dims=dims)))
+        object.__setattr__(self, "names", names)
+        object.__setattr__(self, "unidentifiable", tuple(self.unidentifiable))
+        for name in ("cond", "residual_rms", "rel_error_pct", "r2"):
+            object.__setattr__(self, name, check_scalar(getattr(self, name), f"LSResult.{name}", allow_nan=True))
+        object.__setattr__(self, "n_samples", check_int(self.n_samples, "LSResult.n_samples", lo=0))
+
     def __getitem__(self, name: str) -> float:
         return float(self.values[self.names.index(name)])
+
+    def std_of(self, name: str) -> float:
+        """The standard deviation of parameter `name`."""
+        return float(self.std[self.names.index(name)])
+
+
+@dataclass(frozen=True, eq=False)
+class JointSignals:
+    """One joint's signals on one clock, ready for identification (docs/conventions.md).
+
+    Attributes
+    ----------
+    t : (T,) float
+        Sample times, s, uniform at `fs_hz` (the mocap samples on the controller clock).
+    q : (T,) float
+        Link angle from mocap, rad (zero aligned to the motor's by the mean deflection; short gaps
+        filled by interpolation and counted in `n_filled`).
+    q_m : (T,) float
+        Motor angle / gear ratio, rad (link side), anti-aliased and interpolated at `t`.
+    u : (T,) float
+        Motor torque x gear ratio, N m (link side), anti-aliased and interpolated at `t`.
+    fs_hz : float
+        Sampling rate of `t`, Hz.
+    n_filled : int
+        Link-angle samples filled by interpolation across short gaps.
+    name : str
+        The joint.
+    """
+
+    t: np.ndarray
+    q: np.ndarray
+    q_m: np.ndarray
+    u: np.ndarray
+    fs_hz: float
+    n_filled: int = 0
+    name: str = ""
+
+    def __post_init__(self) -> None:
+        dims = {}
+        for name in ("t", "q", "q_m", "u"):
+            object.__setattr__(self, name, freeze(check_array(getattr(self, name), f"{self.name or 'signals'}: {name}",
+                                                              ("T",), dims=dims, finite=True)))
+        object.__setattr__(self, "fs_hz", check_scalar(self.fs_hz, "fs_hz", positive=True))
+        object.__setattr__(self, "n_filled", check_int(self.n_filled, "n_filled", lo=0))
+
+    @property
+    def n_samples(self) -> int:
+        return int(self.t.size)
+
+    def head(self, n: int) -> "JointSignals":
+        """The first `n` samples."""
+        return JointSignals(self.t[:n], self.q[:n], self.q_m[:n], self.u[:n], self.fs_hz, self.n_filled, self.name)

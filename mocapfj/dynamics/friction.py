@@ -23,6 +23,7 @@ from typing import Protocol, runtime_checkable
 import numpy as np
 
 from ..errors import InputError
+from ..validate import check_scalar
 
 __all__ = [
     "Friction",
@@ -54,14 +55,6 @@ def _sgn(qd: np.ndarray, eps: float) -> np.ndarray:
     return np.tanh(qd / eps) if eps > 0 else np.sign(qd)
 
 
-def _check(name: str, value, *, nonneg: bool = False, positive: bool = False) -> float:
-    v = float(value)
-    if not math.isfinite(v) or (nonneg and v < 0) or (positive and v <= 0):
-        want = "a positive" if positive else "a non-negative" if nonneg else "a finite"
-        raise InputError(None, name, f"{want} number", value)
-    return v
-
-
 def _velocity(qd) -> np.ndarray:
     return np.asarray(qd, dtype=np.float64)
 
@@ -73,8 +66,8 @@ class _Scalars:
 
     def __post_init__(self) -> None:
         for f in fields(self):  # type: ignore[arg-type]
-            object.__setattr__(self, f.name, _check(f.name, getattr(self, f.name)))
-        _check("smoothing", self.smoothing, nonneg=True)
+            object.__setattr__(self, f.name, check_scalar(getattr(self, f.name), f.name))
+        check_scalar(self.smoothing, "smoothing", nonneg=True)
 
     @property
     def params(self) -> dict[str, float]:
@@ -164,8 +157,8 @@ class Stribeck(_Scalars):
 
     def __post_init__(self) -> None:
         super().__post_init__()
-        _check("vs", self.vs, positive=True)
-        _check("exponent", self.exponent, positive=True)
+        check_scalar(self.vs, "vs", positive=True)
+        check_scalar(self.exponent, "exponent", positive=True)
 
     def torque(self, qd, q=None) -> np.ndarray:
         """Friction torque, N m, same shape as `qd` (rad/s). `q` is not used."""
@@ -197,7 +190,7 @@ class AsymmetricStribeck(_Scalars):
     def __post_init__(self) -> None:
         super().__post_init__()
         for name in ("vs_pos", "vs_neg", "exponent"):
-            _check(name, getattr(self, name), positive=True)
+            check_scalar(getattr(self, name), name, positive=True)
 
     def torque(self, qd, q=None) -> np.ndarray:
         """Friction torque, N m, same shape as `qd` (rad/s). `q` is not used."""
@@ -253,7 +246,7 @@ class ExtendedStribeck:
         object.__setattr__(self, "f", _six("f", self.f))
         if self.f_neg is not None:
             object.__setattr__(self, "f_neg", _six("f_neg", self.f_neg))
-        _check("smoothing", self.smoothing, nonneg=True)
+        check_scalar(self.smoothing, "smoothing", nonneg=True)
 
     @property
     def params(self) -> dict[str, float]:

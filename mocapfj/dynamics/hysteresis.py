@@ -17,7 +17,6 @@ spline through the samples (:func:`integrate_states`).
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 from functools import cached_property
 
@@ -26,20 +25,10 @@ from scipy.integrate import solve_ivp
 from scipy.interpolate import CubicSpline
 
 from ..errors import InputError
+from ..validate import check_scalar
 from .springs import check_path
 
 __all__ = ["BoucWen", "Dahl", "MaxwellSlip", "integrate_states"]
-
-
-def _num(name, value, *, positive=False, nonneg=False, lo=None, hi=None) -> float:
-    v = float(value)
-    bad = (not math.isfinite(v) or (positive and v <= 0) or (nonneg and v < 0)
-           or (lo is not None and v < lo) or (hi is not None and v > hi))
-    if bad:
-        rng = f" in [{lo}, {hi}]" if lo is not None else ""
-        want = "a positive" if positive else "a non-negative" if nonneg else "a finite"
-        raise InputError(None, name, f"{want} number{rng}", value)
-    return v
 
 
 def integrate_states(element, delta, t, z0=None, *, rtol: float = 1e-8, atol: float = 1e-10,
@@ -153,12 +142,12 @@ class BoucWen(_Hysteretic):
     n_states = 1
 
     def __post_init__(self) -> None:
-        _num("k", self.k, positive=True)
-        _num("alpha", self.alpha, lo=0.0, hi=1.0)
-        _num("beta", self.beta)
-        _num("gamma", self.gamma)
-        _num("A", self.A, positive=True)
-        _num("n", self.n, positive=True)
+        check_scalar(self.k, "k", positive=True)
+        check_scalar(self.alpha, "alpha", lo=0.0, hi=1.0)
+        check_scalar(self.beta, "beta")
+        check_scalar(self.gamma, "gamma")
+        check_scalar(self.A, "A", positive=True)
+        check_scalar(self.n, "n", positive=True)
         if self.beta + self.gamma <= 0:
             raise InputError(None, "beta + gamma", "a positive sum (bounded hysteresis)", self.beta + self.gamma)
 
@@ -223,10 +212,10 @@ class Dahl(_Hysteretic):
     n_states = 1
 
     def __post_init__(self) -> None:
-        _num("sigma", self.sigma, positive=True)
-        _num("fc", self.fc, positive=True)
-        _num("k0", self.k0, nonneg=True)
-        _num("exponent", self.exponent, positive=True)
+        check_scalar(self.sigma, "sigma", positive=True)
+        check_scalar(self.fc, "fc", positive=True)
+        check_scalar(self.k0, "k0", nonneg=True)
+        check_scalar(self.exponent, "exponent", positive=True)
 
     @property
     def params(self) -> dict[str, float]:
@@ -329,11 +318,11 @@ class MaxwellSlip(_Hysteretic):
                              f"k {k.tolist()}, f {f.tolist()}")
         object.__setattr__(self, "k", tuple(k.tolist()))
         object.__setattr__(self, "f", tuple(f.tolist()))
-        _num("k0", self.k0, nonneg=True)
-        _num("stribeck_ratio", self.stribeck_ratio, positive=True)
-        _num("stribeck_velocity", self.stribeck_velocity, positive=True)
-        _num("attraction", self.attraction, positive=True)
-        _num("slip_band", self.slip_band, lo=0.0, hi=0.5)
+        check_scalar(self.k0, "k0", nonneg=True)
+        check_scalar(self.stribeck_ratio, "stribeck_ratio", positive=True)
+        check_scalar(self.stribeck_velocity, "stribeck_velocity", positive=True)
+        check_scalar(self.attraction, "attraction", positive=True)
+        check_scalar(self.slip_band, "slip_band", lo=0.0, hi=0.5)
 
     @property
     def n_states(self) -> int:

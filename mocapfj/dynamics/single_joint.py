@@ -18,20 +18,13 @@ from functools import cached_property
 import numpy as np
 
 from ..errors import InputError
+from ..validate import check_scalar
 from .drivetrain import Drivetrain
 from .flexjoint import FlexibleJointModel
 from .friction import CoulombViscous, Friction
 from .springs import SpringElement
 
 __all__ = ["SingleJoint"]
-
-
-def _num(name, value, *, positive=False, nonneg=False) -> float:
-    v = float(value)
-    if not math.isfinite(v) or (positive and v <= 0) or (nonneg and v < 0):
-        want = "a positive" if positive else "a non-negative" if nonneg else "a finite"
-        raise InputError(None, name, f"{want} number", value)
-    return v
 
 
 @dataclass(frozen=True, eq=False)
@@ -75,11 +68,11 @@ class SingleJoint(FlexibleJointModel):
 
     def __post_init__(self) -> None:
         for n in ("I", "J"):
-            object.__setattr__(self, n, _num(n, getattr(self, n), positive=True))
+            object.__setattr__(self, n, check_scalar(getattr(self, n), n, positive=True))
         for n in ("b", "d"):
-            object.__setattr__(self, n, _num(n, getattr(self, n), nonneg=True))
+            object.__setattr__(self, n, check_scalar(getattr(self, n), n, nonneg=True))
         for n in ("mglx", "mgly"):
-            object.__setattr__(self, n, _num(n, getattr(self, n)))
+            object.__setattr__(self, n, check_scalar(getattr(self, n), n))
         if not isinstance(self.spring, SpringElement):
             raise InputError(None, "spring", "a spring element (mocapfj.dynamics.springs)", type(self.spring).__name__)
         if not isinstance(self.friction, Friction):

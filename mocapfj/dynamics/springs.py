@@ -16,13 +16,13 @@ The stateful elements (Bouc-Wen, Dahl, Maxwell-slip) are in :mod:`.hysteresis`.
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, fields
 from typing import ClassVar, Protocol, runtime_checkable
 
 import numpy as np
 
 from ..errors import InputError
+from ..validate import check_scalar
 
 __all__ = ["SpringElement", "LinearSpring", "CubicSpring", "PiecewiseSpring", "Backlash",
            "check_path"]
@@ -59,14 +59,6 @@ def check_path(delta, t) -> tuple[np.ndarray, np.ndarray]:
     return d, tt
 
 
-def _num(name: str, value, *, positive: bool = False, nonneg: bool = False) -> float:
-    v = float(value)
-    if not math.isfinite(v) or (positive and v <= 0) or (nonneg and v < 0):
-        want = "a positive" if positive else "a non-negative" if nonneg else "a finite"
-        raise InputError(None, name, f"{want} number", value)
-    return v
-
-
 class _Stateless:
     """The spring protocol for springs without memory (n_states = 0)."""
 
@@ -74,7 +66,7 @@ class _Stateless:
 
     def __post_init__(self) -> None:
         for f in fields(self):  # type: ignore[arg-type]
-            object.__setattr__(self, f.name, _num(f.name, getattr(self, f.name)))
+            object.__setattr__(self, f.name, check_scalar(getattr(self, f.name), f.name))
 
     def initial_state(self) -> np.ndarray:
         return np.zeros(0)
@@ -154,7 +146,7 @@ class PiecewiseSpring(_Stateless):
     def __post_init__(self) -> None:
         super().__post_init__()
         for n in ("k1", "k2", "k3", "tau1"):
-            _num(n, getattr(self, n), positive=True)
+            check_scalar(getattr(self, n), n, positive=True)
         if not self.tau2 > self.tau1:
             raise InputError(None, "tau2", f"a torque above tau1 = {self.tau1}", self.tau2)
 
@@ -193,7 +185,7 @@ class Backlash:
     spring: SpringElement
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "gap", _num("gap", self.gap, nonneg=True))
+        object.__setattr__(self, "gap", check_scalar(self.gap, "gap", nonneg=True))
         if not isinstance(self.spring, SpringElement):
             raise InputError(None, "spring", "a spring element (see SpringElement)", type(self.spring).__name__)
 

@@ -17,24 +17,11 @@ import numpy as np
 
 from ..errors import InputError
 from ..types import BOARD_TYPES, Board, Camera, Rig
+from ..rotations import matrix_from_rotvec, rotvec_from_matrix
 from .c3d import unit_factor
 from .tomlio import check_format, read_toml, require, write_toml
 
-__all__ = ["read_rig", "write_rig", "read_board", "board_from_table", "write_board", "rodrigues_to_matrix", "matrix_to_rodrigues"]
-
-
-def rodrigues_to_matrix(r: np.ndarray) -> np.ndarray:
-    """Rotation vector (3,) to matrix (3, 3), as cv2.Rodrigues."""
-    from scipy.spatial.transform import Rotation
-
-    return Rotation.from_rotvec(np.asarray(r, dtype=np.float64).ravel()).as_matrix()
-
-
-def matrix_to_rodrigues(R: np.ndarray) -> np.ndarray:
-    """Rotation matrix (3, 3) to rotation vector (3,)."""
-    from scipy.spatial.transform import Rotation
-
-    return Rotation.from_matrix(np.asarray(R, dtype=np.float64)).as_rotvec()
+__all__ = ["read_rig", "write_rig", "read_board", "board_from_table", "write_board"]
 
 
 def _array(path, table, key, where, shape):
@@ -80,7 +67,7 @@ def read_rig(path: str | os.PathLike[str], units: str | None = None) -> Rig:
             size=(int(size[0]), int(size[1])),
             K=_array(path, tab, "matrix", key, (3, 3)),
             dist=_array(path, tab, "distortions", key, None).ravel(),
-            R_cam_world=rodrigues_to_matrix(_array(path, tab, "rotation", key, (3,))),
+            R_cam_world=matrix_from_rotvec(_array(path, tab, "rotation", key, (3,))),
             t_cam_world=_array(path, tab, "translation", key, (3,)) * factor,
         ))
     meta["units"] = "m"
@@ -96,7 +83,7 @@ def write_rig(path: str | os.PathLike[str], rig: Rig) -> None:
             "size": [int(cam.size[0]), int(cam.size[1])],
             "matrix": cam.K.tolist(),
             "distortions": cam.dist.tolist(),
-            "rotation": matrix_to_rodrigues(cam.R_cam_world).tolist(),
+            "rotation": rotvec_from_matrix(cam.R_cam_world).tolist(),
             "translation": cam.t_cam_world.tolist(),
         }
     meta = dict(rig.metadata)

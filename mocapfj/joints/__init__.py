@@ -10,7 +10,7 @@
 See docs/architecture.md for what this package owns and may import.
 """
 
-from .angles import joint_angles, outlier_threshold, predict_markers, rotate
+from .angles import joint_angles, outlier_threshold, predict_markers
 from .axis import fit_gamage_lasenby, fit_halvorsen, fit_hinge_ml
 from .chain import ChainAngles, ChainModel, solve_chain
 from .crlb import Crlb, angle_crlb, angle_crlb_cov, hinge_crlb
@@ -20,7 +20,7 @@ from .sync import deflection, resolver_quantum
 __all__ = [
     "fit_gamage_lasenby", "fit_halvorsen", "fit_hinge_ml",
     "Crlb", "hinge_crlb", "angle_crlb", "angle_crlb_cov",
-    "joint_angles", "rotate", "predict_markers", "outlier_threshold",
+    "joint_angles", "predict_markers", "outlier_threshold",
     "kabsch", "cluster_template", "to_parent_frame", "fit_score", "fit_sara",
     "ChainModel", "ChainAngles", "solve_chain",
     "deflection", "resolver_quantum",

@@ -23,46 +23,12 @@ from scipy.special import erfc, gammainccinv
 from ..errors import InputError
 from ..types import JointAngles, JointGeometry
 
-__all__ = ["joint_angles", "rotate", "predict_markers", "outlier_threshold"]
+__all__ = ["joint_angles", "predict_markers", "outlier_threshold"]
 
 _BLOCK = 1 << 14  # frames per block: the (3P, block) work arrays stay in L2/L3 cache
 _GEMM = 1 << 10  # frames per matrix product: small enough that OpenBLAS stays on one thread (its
 # threads spin after each call and, on a busy machine, cost more than the product)
 _ON_AXIS_M = 1e-6  # a marker closer than this to the axis carries no angle information
-
-
-def rotate(axis, q) -> np.ndarray:
-    """Rotation matrices R(n, q) about a unit axis by angle q, right hand (Rodrigues).
-
-    ``R = I + sin q [n]x + (1 - cos q) [n]x^2``.
-
-    Parameters
-    ----------
-    axis : (3,) or (..., 3) float
-        Axis direction in any frame; normalised here.
-    q : float or (...,) float
-        Angle, rad. `axis` and `q` broadcast against each other (leading dimensions).
-
-    Returns
-    -------
-    R : (..., 3, 3) float
-        ``R @ p`` rotates p about `axis` by `q`; (3, 3) for one axis and a scalar angle.
-    """
-    n = np.asarray(axis, dtype=np.float64)
-    q = np.asarray(q, dtype=np.float64)
-    if n.shape[-1:] != (3,):
-        raise InputError(None, "axis", "shape (3,) or (..., 3)", f"shape {n.shape}")
-    norm = np.linalg.norm(n, axis=-1, keepdims=True)
-    if not np.all(norm > 0):
-        raise InputError(None, "axis", "a non-zero direction", "a zero vector")
-    n = n / norm
-    shape = np.broadcast_shapes(n.shape[:-1], q.shape)
-    n = np.broadcast_to(n, shape + (3,))
-    s, c1 = np.sin(q)[..., None, None], (1.0 - np.cos(q))[..., None, None]
-    K = np.zeros(shape + (3, 3))
-    K[..., 0, 1], K[..., 0, 2], K[..., 1, 2] = -n[..., 2], n[..., 1], -n[..., 0]
-    K[..., 1, 0], K[..., 2, 0], K[..., 2, 1] = n[..., 2], -n[..., 1], n[..., 0]
-    return np.eye(3) + s * K + c1 * (K @ K)
 
 
 def predict_markers(geometry: JointGeometry, q) -> np.ndarray:

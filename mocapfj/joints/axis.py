@@ -21,7 +21,8 @@ import numpy as np
 
 from ..errors import InputError
 from ..types import JointGeometry
-from .crlb import marginal_information, normal_blocks, rotate, skew, tangent_basis
+from ..rotations import rotate, skew
+from .crlb import marginal_information, normal_blocks, tangent_basis
 
 __all__ = ["fit_gamage_lasenby", "fit_halvorsen", "fit_hinge_ml", "MIN_FRAMES", "MIN_RANGE_DEG"]
 

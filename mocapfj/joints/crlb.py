@@ -22,8 +22,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import InputError
+from ..rotations import matrix_from_axis_angle, skew
 
-__all__ = ["Crlb", "hinge_crlb", "angle_crlb", "angle_crlb_cov", "tangent_basis", "rotate"]
+__all__ = ["Crlb", "hinge_crlb", "angle_crlb", "angle_crlb_cov", "tangent_basis"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -69,25 +70,6 @@ def tangent_basis(n: np.ndarray) -> np.ndarray:
     return np.stack([e1, K @ e1], axis=1)
 
 
-def skew(n: np.ndarray) -> np.ndarray:
-    """Cross-product matrix K (3, 3) of n (3,): K @ a = n x a."""
-    return np.array([[0.0, -n[2], n[1]], [n[2], 0.0, -n[0]], [-n[1], n[0], 0.0]])
-
-
-def rotate(n: np.ndarray, q: np.ndarray, a: np.ndarray) -> np.ndarray:
-    """R(n, q) a by Rodrigues' formula, right hand; q (...) rad and a (..., 3) broadcast."""
-    q = np.asarray(q, dtype=np.float64)[..., None]
-    c, s = np.cos(q), np.sin(q)
-    return a * c + (a @ skew(n).T) * s + n * (a @ n)[..., None] * (1.0 - c)
-
-
-def _rotation_matrices(n: np.ndarray, q: np.ndarray) -> np.ndarray:
-    """R(n, q_i) as (N, 3, 3) matrices."""
-    K = skew(n)
-    s, c = np.sin(q)[:, None, None], np.cos(q)[:, None, None]
-    return np.eye(3) + s * K + (1.0 - c) * (K @ K)
-
-
 def normal_blocks(n, template, q, wm, resid=None):
     """Gauss-Newton normal equations of the hinge model with the angles eliminated.
 
@@ -109,7 +91,7 @@ def normal_blocks(n, template, q, wm, resid=None):
     """
     P = template.shape[0]
     E = tangent_basis(n)
-    R = _rotation_matrices(n, q)                                  # (N, 3, 3)
+    R = matrix_from_axis_angle(n, q)                                # (N, 3, 3)
     s, c1 = np.sin(q)[:, None, None, None], (1.0 - np.cos(q))[:, None, None, None]
     nxa = template @ skew(n).T                                    # (P, 3) n x a_p
     t = np.matmul(R, nxa.T).transpose(0, 2, 1)                    # n x (R a_p) = R (n x a_p)

@@ -12,7 +12,8 @@ from scipy.spatial.transform import Rotation
 from scipy.stats import chi2, norm
 
 from mocapfj.errors import InputError
-from mocapfj.joints.angles import joint_angles, outlier_threshold, predict_markers, rotate
+from mocapfj.joints.angles import joint_angles, outlier_threshold, predict_markers
+from mocapfj.rotations import matrix_from_axis_angle as rotate
 from mocapfj.types import JointGeometry
 
 SIGMA = 0.5e-3  # m

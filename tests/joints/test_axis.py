@@ -16,7 +16,8 @@ from scipy.spatial.transform import Rotation
 
 from mocapfj.errors import InputError
 from mocapfj.joints.axis import fit_gamage_lasenby, fit_halvorsen, fit_hinge_ml
-from mocapfj.joints.crlb import hinge_crlb, rotate
+from mocapfj.joints.crlb import hinge_crlb
+from mocapfj.rotations import rotate
 
 SIGMA = 0.5e-3
 R_WORLD_HINGE = Rotation.from_rotvec([0.3, -0.5, 0.8]).as_matrix()

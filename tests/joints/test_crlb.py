@@ -7,7 +7,8 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from mocapfj.errors import InputError
-from mocapfj.joints.crlb import angle_crlb, angle_crlb_cov, hinge_crlb, rotate, tangent_basis
+from mocapfj.joints.crlb import angle_crlb, angle_crlb_cov, hinge_crlb, tangent_basis
+from mocapfj.rotations import rotate
 
 SIGMA = 0.5e-3
 

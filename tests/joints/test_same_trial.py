@@ -6,7 +6,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from mocapfj.joints import fit_gamage_lasenby, fit_halvorsen, fit_hinge_ml, joint_angles, rotate
+from mocapfj.joints import fit_gamage_lasenby, fit_halvorsen, fit_hinge_ml, joint_angles
+from mocapfj.rotations import matrix_from_axis_angle as rotate
 
 SIGMA = 0.5e-3
 RADII = np.array([0.08, 0.10, 0.12, 0.14])

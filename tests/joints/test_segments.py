@@ -8,7 +8,8 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from mocapfj.errors import InputError
-from mocapfj.joints.angles import joint_angles, rotate
+from mocapfj.joints.angles import joint_angles
+from mocapfj.rotations import matrix_from_axis_angle as rotate
 from mocapfj.joints.segments import cluster_template, fit_sara, fit_score, kabsch, to_parent_frame
 from mocapfj.types import JointGeometry
 
