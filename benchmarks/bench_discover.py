@@ -82,9 +82,9 @@ def true_models(path: Path) -> dict[str, JointModel]:
 def true_fit(label: str, cache: Path) -> dict:
     """The true model's output-error fit on the validation trial, through the same chain."""
     from mocapfj.ident.conditioning import derivatives, lowpass
-    from mocapfj.pipeline import _discovery_signals
+    import mocapfj
 
-    _, sig = _discovery_signals(bundle(label, "valid", cache), cache / f"{label}_valid_joints")
+    sig = mocapfj.signals(bundle(label, "valid", cache))
     qdd = {n: lowpass(derivatives(lowpass(s.q_m, 250.0, 20.0), 250.0)[1], 250.0, 20.0) for n, s in sig.items()}
     out = {}
     for name, m in true_models(scenario_path(label, "valid")).items():

@@ -8,7 +8,7 @@ Goals (issue 5: identification):
 Each trial is pa10_joint2 with its own seed (marker layout, camera and torque noise) run through
 `mocapfj joints` (markers -> angles -> deflection); the joint signals are cached in --cache
 (default benchmarks/.cache/identify), so a second run only times identification. What is timed
-is `mocapfj.pipeline.identify_signals` (motor-first, the seed 000 two-step and one-step
+is `mocapfj.identify_joint` (motor-first, the seed 000 two-step and one-step
 formulations for the condition numbers, spring selection among all models) per trial, serially
 and on 2 worker processes. Peer in the same run: seed 000's own two-step (step 1 of eq. 6, the
 linear spring of eq. 7), whose accuracy on the same trials is printed beside.
@@ -32,7 +32,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from mocapfj.pipeline import identify_signals  # noqa: E402
+from mocapfj import identify_joint  # noqa: E402
 
 NAMES = ("I", "mglx", "mgly", "c", "v", "J", "b", "k")
 TRUTH = dict(I=6.15, mglx=111.64, mgly=-7.80, c=9.28, v=18.38, J=12.57, b=23.28, k=1.19e4)
@@ -47,7 +47,7 @@ def _trial(seed: int, cache: Path) -> Path:
         return path
     import tempfile
 
-    from mocapfj.pipeline import joint_signals, run_joints
+    import mocapfj
     from mocapfj.synth.record import record_scenario, write_scenario_bundle
     from mocapfj.synth.scenario import load_scenario
 
@@ -55,8 +55,8 @@ def _trial(seed: int, cache: Path) -> Path:
     sr = record_scenario(scn, with_concealment=False)
     with tempfile.TemporaryDirectory() as d:
         write_scenario_bundle(sr, Path(d) / "bundle")
-        run_joints(Path(d) / "bundle", Path(d) / "out")
-        t, q, q_m, u, _ = joint_signals(sr.recording, Path(d) / "out" / "j2.angles.csv", 0)
+        s = mocapfj.signals(Path(d) / "bundle")["j2"]
+        t, q, q_m, u = s.t, s.q, s.q_m, s.u
     cache.mkdir(parents=True, exist_ok=True)
     tmp = path.with_suffix(".tmp.npz")
     np.savez(tmp, t=t, q=q, q_m=q_m, u=u)
@@ -66,9 +66,9 @@ def _trial(seed: int, cache: Path) -> Path:
 
 def _identify(path: Path, method: str = "motor_first") -> dict:
     d = np.load(path)
-    r = identify_signals(d["t"], d["q"], d["q_m"], d["u"], 250.0, method=method)
-    return {"values": {n: r["values"][n][0] for n in NAMES}, "spring": r["spring"]["model"],
-            "cond_two_step": r["cond_two_step"], "cond_one_step": r["cond_one_step"]}
+    r = identify_joint(d["t"], d["q"], d["q_m"], d["u"], fs_hz=250.0, method=method)
+    return {"values": {n: r[n] for n in NAMES}, "spring": r.spring.model,
+            "cond_two_step": r.cond["cond_two_step"], "cond_one_step": r.cond["cond_one_step"]}
 
 
 def main() -> int:
@@ -89,7 +89,7 @@ def main() -> int:
         parallel = list(ex.map(_identify, paths))
         t_par = time.perf_counter() - t0
         t0 = time.perf_counter()
-        seed = list(ex.map(_identify, paths, ["seed"] * len(paths)))
+        seed = list(ex.map(_identify, paths, ["two_step"] * len(paths)))
         t_seed = time.perf_counter() - t0
     assert all(a["values"] == b["values"] for a, b in zip(serial, parallel)), "parallel run differs"
 

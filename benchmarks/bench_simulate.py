@@ -45,16 +45,16 @@ def main() -> None:
     t_tight = time.perf_counter() - t0
 
     # peer 2: pure-Python ray casting on 100 frames, scaled
-    from mocapfj.synth.record import _layout, _rngs
+    from mocapfj.synth.record import marker_layout, scenario_rngs
     from mocapfj.synth.cameras import ring_rig
     from mocapfj.synth.robot_mesh import base_pose, forward_kinematics, pa10_geometry
 
     geometry = pa10_geometry()
-    layout = _layout(scn, geometry, _rngs(scn)[0])
+    layout = marker_layout(scn, geometry, scenario_rngs(scn)[0])
     q = np.tile(np.asarray(scn.pose_rad), (100, 1))
     q[:, 1] = sr.q_true_mocap[:100, 0]
     T = forward_kinematics(q, T_world_base=base_pose())
-    rig = ring_rig(8, rng=_rngs(scn)[1])
+    rig = ring_rig(8, rng=scenario_rngs(scn)[1])
     times = {}
     for backend in ("embree", "triangle"):
         t0 = time.perf_counter()

@@ -16,6 +16,8 @@ from . import __version__
 from .errors import InputError
 from .io import to_jsonable
 
+IDENTIFY_METHODS = ("motor_first", "two_step")   # mocapfj.ident.IDENTIFY_METHODS, without importing ident
+
 # Commands of the design that later versions fill in: (name, one-line help).
 PLANNED = [
     ("calibrate-camera", "calibrate camera intrinsics from board views"),
@@ -37,22 +39,30 @@ def _emit(args, summary: dict, human: Callable[[dict], str]) -> None:
 
 
 def _human_recording(s: dict) -> str:
-    m = s["markers"]
+    m, c = s.get("markers"), s.get("controller")
     lines = []
     if s.get("name"):
         lines.append(f"recording {s['name']}")
-    lines.append(f"  markers    {m['file']}: {m['n_markers']} markers x {m['n_frames']} frames at "
-                 f"{m['rate_hz']:.6g} Hz, {m['missing_pct']:.1f} % missing")
-    if "controller" in s:
-        c = s["controller"]
+    if m is not None:
+        lines.append(f"  markers    {m['file']}: {m['n_markers']} markers x {m['n_frames']} frames at "
+                     f"{m['rate_hz']:.6g} Hz, {m['missing_pct']:.1f} % missing")
+    elif "controller" in s:
+        lines.append("  markers    none (a controller log only: a rigid robot)")
+    if c is not None:
         lines.append(f"  controller {c['file']}: {c['n_samples']} samples at {c['rate_hz']:.6g} Hz, "
                      f"{c['t_start_s']:.3f}..{c['t_end_s']:.3f} s (clock offset {s['clock_offset_s']} s)")
+    elif "controller" in s:
+        lines.append("  controller none (markers only: axes and angles, no deflection)")
     for j in s["joints"]:
         parent = j["parent_markers"] if isinstance(j["parent_markers"], str) else ", ".join(j["parent_markers"])
-        lines.append(f"  joint {j['name']}: link markers {', '.join(j['link_markers'])} "
-                     f"({j['link_markers_missing_pct']:.1f} % missing), parent {parent}, "
-                     f"q_m {j['q_m_range_rad'][0]:+.3f}..{j['q_m_range_rad'][1]:+.3f} rad, "
-                     f"tau rms {j['tau_rms_Nm']:.3g} N m")
+        parts = [f"  joint {j['name']}:"]
+        if j["link_markers"]:
+            parts.append(f"link markers {', '.join(j['link_markers'])} ({j['link_markers_missing_pct']:.1f} % missing), "
+                         f"parent {parent}" + ("," if j["q_m_range_rad"] is not None else ""))
+        if j["q_m_range_rad"] is not None:
+            parts.append(f"q_m {j['q_m_range_rad'][0]:+.3f}..{j['q_m_range_rad'][1]:+.3f} rad, "
+                         f"tau rms {j['tau_rms_Nm']:.3g} N m")
+        lines.append(" ".join(parts))
     return "\n".join(lines)
 
 
@@ -113,12 +123,19 @@ def _cmd_joints(args) -> int:
         for j in s["joints"]:
             lines.append(
                 f"  joint {j['name']} ({j['method']}): axis [{', '.join(f'{x:+.4f}' for x in j['axis'])}], point "
-                f"[{', '.join(f'{x:.4f}' for x in j['point_m'])}] m, radii {', '.join(f'{r:.1f}' for r in j['radii_mm'])} mm "
-                f"(RMS {max(j['radius_rms_mm']):.2f} mm), marker RMS {j['marker_rms_mm']:.2f} mm")
-            lines.append(
-                f"    angle SD {j['angle_sigma_rad'] * 1e3:.3f} mrad over {j['q_range_deg']:.1f} deg, "
-                f"{j['n_frames']} frames ({j['n_frames_invalid']} without an angle), deflection RMS "
-                f"{j['deflection_rms_rad'] * 1e3:.3f} mrad")
+                f"[{', '.join(f'{x:.4f}' for x in j['point_m'])}] m (parent frame), radii "
+                f"{', '.join(f'{r:.1f}' for r in j['radii_mm'])} mm (RMS {max(j['radius_rms_mm']):.2f} mm), "
+                f"marker RMS {j['angle_marker_rms_mm']:.2f} mm in the angle solve")
+            if j["axis_world"] is not None:
+                lines.append(f"    in the world: axis [{', '.join(f'{x:+.4f}' for x in j['axis_world'])}], point "
+                             f"[{', '.join(f'{x:.4f}' for x in j['point_world_m'])}] m")
+            line = (f"    angle SD {j['angle_sigma_rad'] * 1e3:.3f} mrad over {j['q_range_deg']:.1f} deg, "
+                    f"{j['n_frames']} frames ({j['n_frames_invalid']} without an angle)")
+            if j["deflection_rms_rad"] is not None:
+                line += f", deflection RMS {j['deflection_rms_rad'] * 1e3:.3f} mrad"
+            lines.append(line)
+            if "note" in j:
+                lines.append(f"    {j['note']}")
         lines.append(f"  wrote {args.out} (<joint>.joint.toml, <joint>.angles.csv, joints.json)")
         return "\n".join(lines)
 
@@ -129,18 +146,33 @@ def _cmd_joints(args) -> int:
 def _cmd_identify(args) -> int:
     from .pipeline import run_identify
 
-    s = run_identify(args.recordings, args.out, method=args.method, cutoff_hz=args.cutoff, decimate=args.decimate)
+    s = run_identify(args.recordings, args.out, method=args.method, cutoff_hz=args.cutoff, decimate=args.decimate,
+                     validation=args.validation)
 
     def human(s):
         lines = [f"identified {len(s['recordings'])} recording(s)"]
+        if "rigid" in s:
+            r = s["rigid"]
+            lines.append(f"  rigid robot (URDF): {len(r['base_params'])} base parameters, friction {r['friction']}, "
+                         f"cond {r['cond']:.3g}, torque RMS {r['torque_rms']:.3g} N m"
+                         + (f", {r['n_resampled']} samples resampled" if r["n_resampled"] else ""))
+            for n, v in r["base_params"].items():
+                lines.append(f"    {n} = {v['value']:.6g} +- {v['std']:.2g}")
+            if "validation" in s:
+                lines.append("  validation torque RMS: " + ", ".join(f"{j} {v:.3g} N m" for j, v in s["validation"].items()))
         for j in s["joints"]:
-            p = j["params"]
+            p = j.get("params")
+            if not p:
+                continue
             lines.append(f"  joint {j['name']} ({j['n_trials']} trial(s)): " + ", ".join(
-                f"{n} {p[n]['value']:.4g}" for n in ("I", "mglx", "mgly", "c", "v", "J", "b", "k") if n in p))
-            cond = (f", cond two-step {j['cond_two_step']:.0f} vs one-step {j['cond_one_step']:.0f} (seed 000)"
+                f"{n} {p[n]['value']:.4g}" + ("" if p[n].get("determined", True) else " (not determined)")
+                for n in ("I", "mglx", "mgly", "c", "v", "J", "b", "k") if n in p))
+            cond = (f", cond two-step {j['cond_two_step']:.0f} vs one-step {j['cond_one_step']:.0f}"
                     if "cond_two_step" in j else "")
             lines.append(f"    method {j['method']}, spring {j['spring']['model']}{cond}, torque RMS "
                          f"{j['torque_rms']:.3g} N m, {j['frames_filled']} angle frames filled")
+            for n, why in j.get("not_determined", {}).items():
+                lines.append(f"    {n} not determined: {why}")
         if "nlink" in s:
             nl = s["nlink"]
             lines.append(f"  links (URDF, {len(nl['base_params'])} base parameters, cond {nl['cond']:.0f}, torque RMS "
@@ -225,13 +257,16 @@ def build_parser() -> argparse.ArgumentParser:
     jn.add_argument("--json", action="store_true", help="print a JSON summary on stdout")
     jn.set_defaults(func=_cmd_joints)
 
-    idf = sub.add_parser("identify", help="identification of joint dynamics and spring model (seed 000 §II)")
+    idf = sub.add_parser("identify", help="identification of joint dynamics and spring model")
     idf.add_argument("recordings", nargs="+", help="recording bundles; repeats of the same joints give CV %%")
     idf.add_argument("--out", required=True, help="output directory")
-    idf.add_argument("--method", default="motor_first", choices=["motor_first", "seed"],
-                     help="motor_first (default: motor equation, then link equation) or seed (seed 000's step 1)")
+    idf.add_argument("--method", default="motor_first", choices=list(IDENTIFY_METHODS),
+                     help="motor_first (default: motor equation, then link equation) or two_step (Lightcap and "
+                          "Banks 2007)")
     idf.add_argument("--cutoff", type=float, default=None,
-                     help="seed method: low-pass on the angles before differentiation, Hz (default 10)")
+                     help="two_step method: low-pass on the angles before differentiation, Hz (default 10)")
+    idf.add_argument("--validation", default=None,
+                     help="rigid robot (no markers): a second recording on which each joint's torque RMS is reported")
     idf.add_argument("--decimate", type=int, default=2, help="parallel decimation factor")
     idf.add_argument("--json", action="store_true", help="print a JSON summary on stdout")
     idf.set_defaults(func=_cmd_identify)

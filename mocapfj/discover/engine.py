@@ -26,23 +26,13 @@ import numpy as np
 from scipy import stats
 
 from ..errors import InputError
+from ..types import JointSignals
 from ..ident.conditioning import derivatives, lowpass
 from .effects import EFFECTS, FITTERS, SPRING_EFFECTS, Candidate
 from .model import simulate_joint
 from .residuals import Families, families
 
-__all__ = ["JointSignals", "Discovery", "discover", "locate", "effective_n"]
-
-
-@dataclass(frozen=True, eq=False)
-class JointSignals:
-    """One joint's recorded signals on one clock (the mocap samples): t s, q rad (mocap link
-    angle), q_m rad (motor angle / N), u N m (logged torque x N)."""
-
-    t: np.ndarray
-    q: np.ndarray
-    q_m: np.ndarray
-    u: np.ndarray
+__all__ = ["Discovery", "discover", "locate", "effective_n"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -67,6 +57,28 @@ class Discovery:
     residuals: dict = field(default_factory=dict)
     stopped: str = ""
     remaining: dict = field(default_factory=dict)
+    recording: str = ""
+    model_source: str = ""
+
+    @property
+    def verdict(self) -> str:
+        """One line: the effects found, and any mismatch the library leaves unexplained."""
+        left = [f"{j} ({fam} residual {r[f'{fam}_rms_Nm']:.3g} N m RMS)" for j, r in self.remaining.items()
+                for fam in ("spring", "link") if r[f"{fam}_unexplained"]]
+        found = ", ".join(f"{e['name']} ({e['joint']})" for e in self.effects)
+        if not self.effects and not left:
+            return "no missing physics found"
+        if not left:
+            return f"missing physics: {found}"
+        tail = "a mismatch no effect of the library explains remains on " + ", ".join(left) + " (see location)"
+        return f"missing physics: {found}; {tail}" if self.effects else f"no effect of the library found; {tail}"
+
+    def to_dict(self) -> dict:
+        """discovery.json (``mocapfj discover --json``): docs/discovery.md lists the keys."""
+        return {"recording": self.recording, "model": self.model_source, "effects": self.effects,
+                "fit_before": self.fit_before, "fit_after": self.fit_after, "fits": self.fits,
+                "location": self.location, "validation": self.validation, "stopped": self.stopped,
+                "remaining": self.remaining, "verdict": self.verdict}
 
 
 def effective_n(r: np.ndarray) -> float:

@@ -1,6 +1,7 @@
 """The model discovery compares with a recording: one joint's flexible-joint model with its
 elements, read from and written to a model file, and its output-error simulation.
 
+The joint model itself is :class:`mocapfj.dynamics.JointModel` (identification produces it).
 A model file (TOML, ``format = "mocapfj.model/1"``) has one ``[[joints]]`` table per joint:
 ``name``, ``gear_ratio``, ``I``, ``J``, ``mglx``, ``mgly``, ``b`` (seed 000 names and SI units,
 docs/conventions.md), ``friction`` and ``spring`` tables (:mod:`mocapfj.dynamics.spec`), and the
@@ -19,75 +20,19 @@ gives the link angle, the deflection and the motor torque the model needs for th
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-from ..dynamics import (CoulombViscous, Drivetrain, LinearSpring, PositionTorque, PrescribedMotor, SingleJoint,
-                        TransmissionError, shift_signal, simulate)
-from ..dynamics.spec import FRICTION_MODELS, SPRING_MODELS, element_from_table, element_to_table
+from ..dynamics import JointModel, PositionTorque, PrescribedMotor, TransmissionError, shift_signal, simulate
+from ..dynamics.spec import FRICTION_MODELS, SPRING_MODELS, element_from_table
 from ..errors import InputError
 from ..io.tomlio import read_toml, require, write_toml
 
 __all__ = ["JointModel", "read_model_file", "write_model_file", "fit_pct", "simulate_joint", "OutputError"]
 
 MODEL_FORMAT = "mocapfj.model/1"
-
-
-@dataclass(frozen=True)
-class JointModel:
-    """One joint: seed 000 eq. (4) with its elements (SI, link side, docs/conventions.md)."""
-
-    name: str
-    gear_ratio: float
-    I: float
-    J: float
-    mglx: float
-    mgly: float
-    b: float
-    friction: object = field(default_factory=lambda: CoulombViscous(0.0, 0.0))
-    spring: object = field(default_factory=lambda: LinearSpring(1.0))
-    transmission_error: TransmissionError | None = None
-    position_torque: PositionTorque | None = None
-    torque_gain: float = 1.0
-    delay_s: float = 0.0
-    coupling: dict = field(default_factory=dict)
-
-    def single_joint(self, smoothing: float = 1e-3) -> SingleJoint:
-        """The dynamics model (friction smoothed with tanh(q'/smoothing) for the integrator)."""
-        dt = Drivetrain(transmission_error=self.transmission_error, balancer=self.position_torque,
-                        torque_gain=self.torque_gain)
-        return SingleJoint(I=self.I, J=self.J, spring=self.spring, mglx=self.mglx, mgly=self.mgly, b=self.b,
-                           friction=self.friction.with_smoothing(smoothing), drivetrain=dt, name=self.name)
-
-    def stiffness(self) -> float:
-        """The spring's mean slope over +-10 mrad, N m / rad (its linear equivalent)."""
-        d = np.linspace(-0.01, 0.01, 201)
-        tau = np.asarray(self.spring.run(d, np.arange(d.size) * 1e-3)
-                         if hasattr(self.spring, "run") and getattr(self.spring, "n_states", 0) else self.spring.torque(d))
-        return float(np.polyfit(d, tau, 1)[0])
-
-    def to_table(self) -> dict:
-        out = {"name": self.name, "gear_ratio": self.gear_ratio, "I": self.I, "J": self.J, "mglx": self.mglx,
-               "mgly": self.mgly, "b": self.b, "friction": element_to_table(self.friction),
-               "spring": element_to_table(self.spring)}
-        if self.transmission_error is not None:
-            te = self.transmission_error
-            out["transmission_error"] = {"amplitudes_rad": list(te.amplitudes), "phases_rad": list(te.phases),
-                                         "orders": list(te.orders)}
-        if self.position_torque is not None:
-            out["position_torque"] = self.position_torque.params
-        if self.torque_gain != 1.0:
-            out["torque_gain"] = self.torque_gain
-        if self.delay_s != 0.0:
-            out["delay_s"] = self.delay_s
-        if self.coupling:
-            out["coupling"] = dict(self.coupling)
-        return out
-
-    def with_(self, **changes) -> "JointModel":
-        return replace(self, **changes)
 
 
 def _joint_from_table(tab: dict, path, i: int) -> JointModel:

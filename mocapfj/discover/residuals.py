@@ -25,7 +25,7 @@ from ..dynamics import BoucWen, LinearSpring, shift_signal
 from ..errors import InputError
 from ..ident.conditioning import complementary, derivatives, lowpass
 from ..ident.springs import bouc_wen_path
-from .model import JointModel
+from ..dynamics import JointModel
 
 __all__ = ["Families", "families", "spring_torque_of", "RESIDUAL_HZ"]
 

@@ -23,12 +23,14 @@ Example
 True
 """
 
+from importlib import import_module
+
 from .drivetrain import Drivetrain, GravityBalancer, JointCoupling, PositionTorque, TransmissionError, shift_signal
 from .flexjoint import FlexibleJointModel
 from .friction import (AsymmetricCoulombViscous, AsymmetricStribeck, CoulombViscous, ExtendedStribeck, Friction,
                        PositionDependent, Stribeck)
 from .hysteresis import BoucWen, Dahl, MaxwellSlip, integrate_states
-from .nlink import NLinkModel
+from .joint_model import JointModel
 from .simulate import PID, PrescribedMotor, SimulationResult, TorqueInput, controller_log, resample, simulate
 from .single_joint import SingleJoint
 from .spec import FRICTION_MODELS, SPRING_MODELS, element_from_table, element_to_table
@@ -44,9 +46,16 @@ __all__ = [
     # drivetrain
     "TransmissionError", "GravityBalancer", "PositionTorque", "JointCoupling", "Drivetrain", "shift_signal",
     # models
-    "FlexibleJointModel", "SingleJoint", "NLinkModel",
+    "FlexibleJointModel", "SingleJoint", "NLinkModel", "JointModel",
     # simulation
     "PrescribedMotor", "PID", "TorqueInput", "SimulationResult", "simulate", "resample", "controller_log",
     # model tables
     "FRICTION_MODELS", "SPRING_MODELS", "element_from_table", "element_to_table",
 ]
+
+
+def __getattr__(name: str):
+    # the n-link model needs Pinocchio, which takes seconds to import: load it on first use
+    if name == "NLinkModel":
+        return import_module(".nlink", __name__).NLinkModel
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

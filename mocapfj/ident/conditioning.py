@@ -9,9 +9,10 @@ import numpy as np
 from scipy import signal
 
 from ..errors import InputError
+from ..types import ControllerLog, Deflection, JointSignals
 
 __all__ = ["lowpass", "derivatives", "decimate_parallel", "resample_to", "complementary", "white_noise_sd",
-           "noise_gain"]
+           "noise_gain", "controller_on", "check_signals", "joint_signals"]
 
 
 def _check_rate(fs_hz: float, cutoff_hz: float, what: str) -> None:
@@ -105,3 +106,80 @@ def noise_gain(fs_hz: float, *cutoffs_hz: float) -> float:
     for fc in cutoffs_hz:
         h = lowpass(h, fs_hz, fc)
     return float(h @ h)
+
+
+def controller_on(t_to: np.ndarray, t_ctrl: np.ndarray, x: np.ndarray, fs_ctrl_hz: float,
+                  cutoff_hz: float | None = None) -> np.ndarray:
+    """A controller signal x (T_c,) at t_ctrl (s) on another time base t_to (T,) (s, same clock).
+
+    Anti-aliased first: zero-phase low-pass at `cutoff_hz` (default: 0.4 x the target rate) at the
+    controller rate, then linear interpolation; NaN outside the log's span.
+    """
+    t_to = np.asarray(t_to, dtype=np.float64)
+    fs_to = 1.0 / float(np.median(np.diff(t_to)))
+    fc = 0.4 * min(fs_to, fs_ctrl_hz) if cutoff_hz is None else cutoff_hz
+    xf = lowpass(np.asarray(x, dtype=np.float64), fs_ctrl_hz, fc) if fc < 0.5 * fs_ctrl_hz else x
+    return resample_to(np.asarray(t_ctrl, dtype=np.float64), xf, t_to)
+
+
+def check_signals(t, q, q_m, u, fs_hz: float):
+    """(t, q, q_m, u) as float64 (T,) arrays, finite, on one uniform time base at fs_hz; raises
+    InputError naming the first that is not."""
+    arrs = [np.asarray(a, dtype=np.float64) for a in (t, q, q_m, u)]
+    t, q, q_m, u = arrs
+    if t.ndim != 1 or any(a.shape != t.shape for a in arrs):
+        raise InputError(None, "t, q, q_m, u", "four (T,) arrays", [a.shape for a in arrs])
+    for name, a in zip(("t", "q", "q_m", "u"), arrs):
+        if not np.isfinite(a).all():
+            raise InputError(None, name, "finite samples on one uniform time base", f"{int((~np.isfinite(a)).sum())} NaN",
+                             hint="fill short gaps (np.interp) or cut the trial before identifying")
+    dt = np.diff(t)
+    if not (np.isfinite(fs_hz) and fs_hz > 0) or np.abs(dt * fs_hz - 1.0).max() > 1e-3:
+        raise InputError(None, "t, fs_hz", f"uniform samples at fs_hz = {fs_hz} Hz",
+                         f"steps {dt.min():.6g} .. {dt.max():.6g} s", hint="resample onto one clock (controller_on)")
+    return t, q, q_m, u
+
+
+def joint_signals(d: Deflection, controller: ControllerLog, joint: str, *, min_valid: float = 0.95,
+                  max_gap_s: float = 0.1, source=None) -> JointSignals:
+    """A joint's link angle and its controller signals on one clock, for identification.
+
+    `d` is the joint's deflection from the joints stage (mocap samples on the controller clock,
+    link angle zero aligned to the motor's). Gaps in the link angle of up to `max_gap_s` are filled
+    by linear interpolation (`n_filled`: a counted repair); the logged motor angle and torque are
+    low-passed (zero phase, 100 Hz or 0.45 x their rate) and interpolated at the mocap samples;
+    samples outside the controller log are dropped. A longer gap, less than `min_valid` of the
+    frames with an angle, or a NaN in the controller log is refused with the time it happens:
+    interpolation across it would invent the motion the identification fits. `source` names the
+    recording in messages.
+    """
+    t, q = d.t, d.q
+    ok = np.isfinite(q)
+    if ok.mean() < min_valid:
+        raise InputError(source, f"joints[{joint}] link angle",
+                         f"a link angle in at least {100 * min_valid:.0f} % of the frames", f"{100 * ok.mean():.1f} %",
+                         hint="check the markers' visibility")
+    if not ok.all():
+        edges = np.diff(np.concatenate([[0], (~ok).astype(np.int8), [0]]))
+        starts, stops = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)
+        dt = float(np.median(np.diff(t)))
+        longest = int(np.argmax(stops - starts))
+        gap = (stops[longest] - starts[longest] + 1) * dt
+        if gap > max_gap_s:
+            raise InputError(source, f"joints[{joint}] link angle", f"gaps in the link angle of at most {max_gap_s:g} s",
+                             f"{gap:.3f} s without an angle from t = {t[starts[longest]]:.3f} s",
+                             hint="cut the trial around the gap, or check the markers' visibility there")
+    q = np.interp(t, t[ok], q[ok])
+    j = controller.joint_names.index(joint)
+    for name, x in (("q_m", controller.q_m[:, j]), ("tau", controller.tau[:, j])):
+        bad = ~np.isfinite(x)
+        if bad.any():
+            raise InputError(source, f"controller log {name} (joint {joint})", "finite samples",
+                             f"{int(bad.sum())} NaN, the first at t = {controller.t[np.argmax(bad)]:.4f} s",
+                             hint="cut the trial where the log is complete")
+    cutoff = min(100.0, 0.45 * controller.rate_hz)
+    q_m = controller_on(t, controller.t, controller.q_m[:, j], controller.rate_hz, cutoff)
+    u = controller_on(t, controller.t, controller.tau[:, j], controller.rate_hz, cutoff)
+    g = np.isfinite(q_m) & np.isfinite(u)
+    fs = 1.0 / float(np.median(np.diff(t)))
+    return JointSignals(t=t[g], q=q[g], q_m=q_m[g], u=u[g], fs_hz=fs, n_filled=int((~ok).sum()), name=joint)

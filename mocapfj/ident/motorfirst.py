@@ -40,11 +40,11 @@ import numpy as np
 
 from ..errors import InputError
 from ..types import LSResult
-from .conditioning import complementary, decimate_parallel, derivatives, lowpass, noise_gain, white_noise_sd
+from .conditioning import (check_signals, complementary, decimate_parallel, derivatives, lowpass, noise_gain,
+                           white_noise_sd)
 from .ls import ls_fit
-from .twostep import _check_inputs
 
-__all__ = ["MOTOR_NAMES", "LINK_NAMES", "MotorFirstResult", "MotorStage", "motor_stage", "identify_joint_motor_first",
+__all__ = ["MOTOR_NAMES", "LINK_NAMES", "MotorFirstResult", "MotorStage", "motor_stage", "identify_motor_first",
            "white_noise_sd"]
 
 MOTOR_NAMES = ("J", "b", "k", "tau0")
@@ -53,7 +53,7 @@ LINK_NAMES = ("I", "mglx", "mgly", "c", "v")
 
 @dataclass(frozen=True, eq=False)
 class MotorFirstResult:
-    """Result of :func:`identify_joint_motor_first`.
+    """Result of :func:`identify_motor_first`.
 
     motor : LSResult of (J, b, k, tau0): kg m^2, N m s, N m / rad, N m.
     link : LSResult of (I, mglx, mgly, c, v): kg m^2, N m, N m, N m, N m s (gravity pair referred
@@ -108,11 +108,11 @@ def motor_stage(t, q, q_m, u, *, fs_hz: float, cutoff_hz: float = 5.0, link_cuto
                 hysteresis: bool = True, min_gain_pct: float = 2.0, bias_compensation: bool = True) -> MotorStage:
     """The motor equation of one joint (J, b, k, tau0), its spring torque and the rebuilt link angle.
 
-    The first half of :func:`identify_joint_motor_first`, whose docstring documents the
+    The first half of :func:`identify_motor_first`, whose docstring documents the
     parameters (all but `sign_eps`) and the errors; the n-link identification (:mod:`.nlink`)
     runs it per joint.
     """
-    t, q, q_m, u = _check_inputs(t, q, q_m, u, fs_hz)
+    t, q, q_m, u = check_signals(t, q, q_m, u, fs_hz)
     n_trim = int(round(trim_s * fs_hz))
     need = 2 * n_trim + int(np.ceil(4 * fs_hz / min(cutoff_hz, split_hz)))
     if t.size < need:
@@ -169,7 +169,7 @@ def motor_stage(t, q, q_m, u, *, fs_hz: float, cutoff_hz: float = 5.0, link_cuto
                       q_hat=qmf - d_hat, delta=d_mocap)
 
 
-def identify_joint_motor_first(t, q, q_m, u, *, fs_hz: float, cutoff_hz: float = 5.0, link_cutoff_hz: float = 20.0,
+def identify_motor_first(t, q, q_m, u, *, fs_hz: float, cutoff_hz: float = 5.0, link_cutoff_hz: float = 20.0,
                                split_hz: float = 2.0, decimate: int = 2, sign_eps: float = 0.01,
                                trim_s: float = 1.0, spring=None, q_zero_rad: float = 0.0,
                                hysteresis: bool = True, min_gain_pct: float = 2.0,

@@ -30,7 +30,7 @@ from .ls import ls_fit
 from .motorfirst import MotorStage, motor_stage
 from .regressor import base_parameters, load_pin_model, nlink_regressor
 
-__all__ = ["NLinkResult", "identify_nlink_motor_first"]
+__all__ = ["NLinkResult", "identify_nlink_motor_first", "identify_nlink_joints"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -106,3 +106,47 @@ def identify_nlink_motor_first(model, t, Q, Q_m, U, *, fs_hz: float, joint_names
     base = ls_fit(W[keep][:, base_idx], y[keep], base_names)
     return NLinkResult(motors=tuple(motors), base=base, base_idx=base_idx, Kd=Kd, names=tuple(names),
                        joint_names=names_j)
+
+
+def identify_nlink_joints(model, signals, *, decimate: int = 2, recording: str = "", gear_ratios=None,
+                          spring_models=None) -> tuple[list, dict]:
+    """:func:`identify_nlink_motor_first` on the joints' :class:`~mocapfj.types.JointSignals` (one
+    clock, one span, in the model's joint order), as :class:`~.result.IdentifiedJoint` per joint
+    (J, b, k and the spring model) and the links' base parameters {base: {name: (value, std)},
+    cond, torque_rms, r2}."""
+    from ..dynamics import LinearSpring
+    from .joint import spring_pairs
+    from .result import IdentifiedJoint, Parameter, SpringResult
+    from .springs import HYSTERETIC, SPRING_FITTERS, select_spring_model
+
+    t = signals[0].t
+    fs = signals[0].fs_hz
+    Q, Q_m, U = (np.column_stack([getattr(s, k) for s in signals]) for k in ("q", "q_m", "u"))
+    res = identify_nlink_motor_first(model, t, Q, Q_m, U, fs_hz=fs, decimate=decimate,
+                                     joint_names=[s.name for s in signals])
+    base = {name: (float(v), float(sd)) for name, v, sd in zip(res.base.names, res.base.values, res.base.std)}
+    summary = {"base": base, "cond": res.base.cond, "torque_rms": res.base.residual_rms, "r2": res.base.r2}
+    gears = gear_ratios or [1.0] * len(signals)
+    models = tuple(spring_models or (k for k in SPRING_FITTERS if k not in HYSTERETIC))
+    out = []
+    for s, m, gear in zip(signals, res.motors, gears):
+        if m.hysteresis is not None:
+            from ..dynamics import BoucWen
+
+            params = {k: m.hysteresis[k] for k in ("k", "alpha", "beta", "gamma")}
+            spring = SpringResult("bouc_wen", params, BoucWen(**params), motor_rms_gain_pct=m.hysteresis["rms_gain_pct"])
+        else:
+            inner = m.inner
+            sel = select_spring_model(*spring_pairs(m.delta[inner], m.tau_s[inner], m.t[inner], fs), models=models)
+            c = sel.chosen
+            spring = SpringResult(c.model, {k: float(v) for k, v in c.params.items()},
+                                  LinearSpring(k=m.motor["k"]) if c.model == "linear" else c.element,
+                                  r2=sel.r2, holdout_rms_Nm=sel.holdout_rms)
+        params = {n: Parameter(n, m.motor[n], m.motor.std_of(n)) for n in ("J", "b", "k")}
+        out.append(IdentifiedJoint(name=s.name, method="nlink_motor_first", params=params, model=None, spring=spring,
+                                   stages={"motor": m.motor}, cond={"cond_motor": m.motor.cond},
+                                   torque_rms=m.motor.residual_rms, q_zero_rad=m.q_zero_rad,
+                                   frames_filled=s.n_filled, recording=recording,
+                                   extra={"nlink": {"base": base, "cond": res.base.cond,
+                                                    "torque_rms": res.base.residual_rms, "r2": res.base.r2}}))
+    return out, summary

@@ -28,6 +28,7 @@ import pinocchio as pin
 from scipy.linalg import qr
 
 from ..errors import InputError
+from .ls import ZERO_COLUMN_RTOL
 
 __all__ = ["INERTIAL_NAMES", "FRICTION_MODELS", "load_pin_model", "nlink_regressor", "standard_parameters",
            "base_parameters", "base_from_standard"]
@@ -154,7 +155,10 @@ def base_parameters(W: np.ndarray, names: Sequence[str], rtol: float = 1e-10,
     the span of the columns before it), so for nlink_regressor's order the distal bodies'
     parameters regroup into the proximal ones' and armature into Izz, as in Khalil's symbolic
     rules (if that greedy pass disagrees with the rank, the QR's pivots are used). Zero columns
-    (unexcited or structurally absent parameters) are dependent with Kd = 0.
+    (unexcited or structurally absent parameters) are dependent with Kd = 0, and so are columns
+    that are zero to rounding: below `ls.ZERO_COLUMN_RTOL` of the largest column's norm (a joint
+    origin rotated by rpy = +-pi/2 leaves 6e-17 where the exact regressor has 0; scaled to unit
+    norm, such a column of rounding errors would look independent of everything).
 
     Parameters
     ----------
@@ -174,7 +178,7 @@ def base_parameters(W: np.ndarray, names: Sequence[str], rtol: float = 1e-10,
     if W.ndim != 2 or W.shape[1] != len(names) or not np.isfinite(W).all():
         raise InputError(None, "W, names", "a finite (r, p) matrix and p names", f"{W.shape}, {len(names)} names")
     scale = np.linalg.norm(W, axis=0)
-    nonzero = np.flatnonzero(scale > 0)
+    nonzero = np.flatnonzero(scale > ZERO_COLUMN_RTOL * scale.max()) if scale.max() > 0 else np.empty(0, int)
     if nonzero.size == 0:
         raise InputError(None, "W", "at least one non-zero column", "all columns zero")
     Ws = W[:, nonzero] / scale[nonzero]

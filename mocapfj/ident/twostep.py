@@ -42,11 +42,11 @@ import numpy as np
 
 from ..errors import InputError
 from ..types import LSResult
-from .conditioning import lowpass, resample_to
+from .conditioning import check_signals, lowpass
 from .ls import ls_fit
 
 __all__ = ["STEP1_NAMES", "SPRING_NAMES", "ONE_STEP_NAMES", "TwoStepResult", "step1_regressor",
-           "one_step_regressor", "identify_joint", "controller_on"]
+           "one_step_regressor", "identify_two_step"]
 
 STEP1_NAMES = ("I", "mglx", "mgly", "c", "v", "J", "b")
 SPRING_NAMES = ("k", "tau0")
@@ -55,7 +55,7 @@ ONE_STEP_NAMES = STEP1_NAMES + SPRING_NAMES
 
 @dataclass(frozen=True, eq=False)
 class TwoStepResult:
-    """Result of :func:`identify_joint`.
+    """Result of :func:`identify_two_step`.
 
     Attributes
     ----------
@@ -114,36 +114,6 @@ def one_step_regressor(W1: np.ndarray, delta: np.ndarray, u: np.ndarray) -> tupl
     return np.vstack([link, motor]), np.concatenate([np.zeros(T), u])
 
 
-def controller_on(t_to: np.ndarray, t_ctrl: np.ndarray, x: np.ndarray, fs_ctrl_hz: float,
-                  cutoff_hz: float | None = None) -> np.ndarray:
-    """A controller signal x (T_c,) at t_ctrl (s) on another time base t_to (T,) (s, same clock).
-
-    Anti-aliased first: zero-phase low-pass at `cutoff_hz` (default: 0.4 x the target rate) at the
-    controller rate, then linear interpolation; NaN outside the log's span.
-    """
-    t_to = np.asarray(t_to, dtype=np.float64)
-    fs_to = 1.0 / float(np.median(np.diff(t_to)))
-    fc = 0.4 * min(fs_to, fs_ctrl_hz) if cutoff_hz is None else cutoff_hz
-    xf = lowpass(np.asarray(x, dtype=np.float64), fs_ctrl_hz, fc) if fc < 0.5 * fs_ctrl_hz else x
-    return resample_to(np.asarray(t_ctrl, dtype=np.float64), xf, t_to)
-
-
-def _check_inputs(t, q, q_m, u, fs_hz):
-    arrs = [np.asarray(a, dtype=np.float64) for a in (t, q, q_m, u)]
-    t, q, q_m, u = arrs
-    if t.ndim != 1 or any(a.shape != t.shape for a in arrs):
-        raise InputError(None, "t, q, q_m, u", "four (T,) arrays", [a.shape for a in arrs])
-    for name, a in zip(("t", "q", "q_m", "u"), arrs):
-        if not np.isfinite(a).all():
-            raise InputError(None, name, "finite samples on one uniform time base", f"{int((~np.isfinite(a)).sum())} NaN",
-                             hint="fill short gaps (np.interp) or cut the trial before identifying")
-    dt = np.diff(t)
-    if not (np.isfinite(fs_hz) and fs_hz > 0) or np.abs(dt * fs_hz - 1.0).max() > 1e-3:
-        raise InputError(None, "t, fs_hz", f"uniform samples at fs_hz = {fs_hz} Hz",
-                         f"steps {dt.min():.6g} .. {dt.max():.6g} s", hint="resample onto one clock (controller_on)")
-    return t, q, q_m, u
-
-
 def _rezero(res: LSResult, e: float) -> LSResult:
     """Rotate the (mglx, mgly) estimates from a zero shifted by e back: (mglx, mgly) = R(-e) (A, B)."""
     i, j = res.names.index("mglx"), res.names.index("mgly")
@@ -158,7 +128,7 @@ def _rezero(res: LSResult, e: float) -> LSResult:
     return replace(res, values=values, cov=cov, std=std, rel_std_pct=rel)
 
 
-def identify_joint(t, q, q_m, u, *, fs_hz: float, cutoff_hz: float = 30.0, decimate: int = 1,
+def identify_two_step(t, q, q_m, u, *, fs_hz: float, cutoff_hz: float = 30.0, decimate: int = 1,
                    parallel_cutoff_hz: float | None = None, sign_eps: float = 0.01,
                    rezero: bool = True, trim_s: float = 1.0) -> TwoStepResult:
     """Two-step identification of one joint, seed 000 eq. (5)-(7), with eq. (4) as the baseline.
@@ -198,7 +168,7 @@ def identify_joint(t, q, q_m, u, *, fs_hz: float, cutoff_hz: float = 30.0, decim
     InputError
         Bad shapes, NaN, non-uniform time; a parameter the trajectory does not excite (named).
     """
-    t, q, q_m, u = _check_inputs(t, q, q_m, u, fs_hz)
+    t, q, q_m, u = check_signals(t, q, q_m, u, fs_hz)
     if int(decimate) != decimate or decimate < 1:
         raise InputError(None, "decimate", "a positive whole factor", decimate)
     decimate = int(decimate)

@@ -94,30 +94,31 @@ def _str_list(path, table, key, where) -> tuple[str, ...]:
     return tuple(value)
 
 
-def _parse_joint(path, tab, i) -> JointSpec:
+def _parse_joint(path, tab, i, has_markers: bool, has_controller: bool) -> JointSpec:
     where = f"joints[{i}]"
     if not isinstance(tab, dict):
         raise InputError(path, where, "a [[joints]] table", repr(tab))
     name = require(path, tab, "name", str, where)
     where = f"joints[{name}]"
-    gear = require(path, tab, "gear_ratio", (int, float), where)
-    if not gear > 0:
-        raise InputError(path, f"{where}.gear_ratio", "a positive gear ratio", gear)
+    gear = (require(path, tab, "gear_ratio", (int, float), where) if has_controller
+            else require(path, tab, "gear_ratio", (int, float), where, default=1.0))
+    if not (np.isfinite(gear) and gear > 0):
+        raise InputError(path, f"{where}.gear_ratio", "a positive, finite gear ratio", gear)
     parent = tab.get("parent_markers", WORLD)
     if isinstance(parent, str):
         if parent != WORLD:
             raise InputError(path, f"{where}.parent_markers", f'a list of marker labels or "{WORLD}"', repr(parent))
     else:
         parent = _str_list(path, tab, "parent_markers", where)
-    return JointSpec(
-        name=name,
-        motor_position=require(path, tab, "motor_position", str, where),
-        motor_torque=require(path, tab, "motor_torque", str, where),
-        gear_ratio=float(gear),
-        link_markers=_str_list(path, tab, "link_markers", where),
-        parent_markers=parent,
-        extra={k: v for k, v in tab.items() if k not in _JOINT_KEYS},
-    )
+    if has_controller:
+        motor_position = require(path, tab, "motor_position", str, where)
+        motor_torque = require(path, tab, "motor_torque", str, where)
+    else:
+        motor_position = motor_torque = ""
+    link = _str_list(path, tab, "link_markers", where) if has_markers else ()
+    return JointSpec(name=name, motor_position=motor_position, motor_torque=motor_torque, gear_ratio=float(gear),
+                     link_markers=link, parent_markers=parent,
+                     extra={k: v for k, v in tab.items() if k not in _JOINT_KEYS})
 
 
 def _bundle_file(root: Path, toml_path: Path, field: str, name: str) -> Path:
@@ -130,8 +131,10 @@ def _bundle_file(root: Path, toml_path: Path, field: str, name: str) -> Path:
 def load_recording(path: str | os.PathLike[str]) -> Recording:
     """Load a recording bundle from its directory (or its recording.toml).
 
-    Checks, each an InputError naming file and field: the format version; the marker and
-    controller files exist; every column and marker label the joints name exists; no named
+    A bundle may hold markers and a controller log (a flexible-joint robot), markers only (no
+    ``[controller]``: a passive hinge or a human joint) or a controller log only (no ``[markers]``,
+    with a URDF: a rigid robot). Checks, each an InputError naming file and field: the format
+    version; the marker and controller files exist; every column and marker label the joints name exists; no named
     marker is missing in every frame; controller time increases strictly; the two streams cover
     the same span (within ``[sync] duration_tolerance_s``, default 0.1 s) after the declared
     clock offset.
@@ -145,27 +148,43 @@ def load_recording(path: str | os.PathLike[str]) -> Recording:
     check_format(toml_path, doc, "recording", FORMAT_VERSION)
     name = require(toml_path, doc, "name", str, default=root.name)
 
-    mk = require(toml_path, doc, "markers", dict)
-    marker_file = require(toml_path, mk, "file", str, "markers")
-    offset = float(require(toml_path, mk, "clock_offset_s", (int, float), "markers", default=0.0))
-    ct = require(toml_path, doc, "controller", dict)
-    controller_file = require(toml_path, ct, "file", str, "controller")
-    time_column = require(toml_path, ct, "time_column", str, "controller", default="time")
+    if "markers" not in doc and "controller" not in doc:
+        raise InputError(toml_path, "markers, controller", "a [markers] table, a [controller] table or both", "neither")
+    has_markers, has_controller = "markers" in doc, "controller" in doc
+    marker_file, offset = "", 0.0
+    if has_markers:
+        mk = require(toml_path, doc, "markers", dict)
+        marker_file = require(toml_path, mk, "file", str, "markers")
+        offset = float(require(toml_path, mk, "clock_offset_s", (int, float), "markers", default=0.0))
+        if not np.isfinite(offset):
+            raise InputError(toml_path, "markers.clock_offset_s", "a finite offset in seconds", offset)
+    controller_file, time_column = "", "time"
+    if has_controller:
+        ct = require(toml_path, doc, "controller", dict)
+        controller_file = require(toml_path, ct, "file", str, "controller")
+        time_column = require(toml_path, ct, "time_column", str, "controller", default="time")
     joints_raw = require(toml_path, doc, "joints", list)
     if not joints_raw:
         raise InputError(toml_path, "joints", "at least one [[joints]] table", "none")
-    joints = tuple(_parse_joint(toml_path, tab, i) for i, tab in enumerate(joints_raw))
+    joints = tuple(_parse_joint(toml_path, tab, i, has_markers, has_controller) for i, tab in enumerate(joints_raw))
     names = [j.name for j in joints]
     if len(set(names)) != len(names):
         raise InputError(toml_path, "joints.name", "unique joint names", names)
 
-    markers = read_markers(_bundle_file(root, toml_path, "markers.file", marker_file))
-    controller = read_controller(_bundle_file(root, toml_path, "controller.file", controller_file), time_column, joints)
-    _check_markers(root / marker_file, markers, joints)
-
-    sync = require(toml_path, doc, "sync", dict, default={})
-    tol = float(require(toml_path, sync, "duration_tolerance_s", (int, float), "sync", default=DEFAULT_DURATION_TOLERANCE_S))
-    _check_spans(toml_path, markers, controller, offset, tol)
+    markers = controller = None
+    if has_markers:
+        markers = read_markers(_bundle_file(root, toml_path, "markers.file", marker_file))
+        _check_markers(root / marker_file, markers, joints)
+    if has_controller:
+        controller = read_controller(_bundle_file(root, toml_path, "controller.file", controller_file), time_column,
+                                     joints)
+    if has_markers and has_controller:
+        sync = require(toml_path, doc, "sync", dict, default={})
+        tol = float(require(toml_path, sync, "duration_tolerance_s", (int, float), "sync",
+                            default=DEFAULT_DURATION_TOLERANCE_S))
+        if not (np.isfinite(tol) and tol >= 0):
+            raise InputError(toml_path, "sync.duration_tolerance_s", "a non-negative, finite tolerance in seconds", tol)
+        _check_spans(toml_path, markers, controller, offset, tol)
 
     urdf = rig = detections = None
     model = require(toml_path, doc, "model", dict, default={})
@@ -224,12 +243,19 @@ def recording_spec(rec: Recording) -> dict:
     doc.setdefault("controller", {})
     doc["controller"]["file"] = rec.controller_file
     doc["controller"]["time_column"] = rec.time_column
+    if rec.markers is None:
+        del doc["markers"]
+    if rec.controller is None:
+        del doc["controller"]
     joints = []
     for j in rec.joints:
         tab = dict(j.extra)
-        tab.update(name=j.name, motor_position=j.motor_position, motor_torque=j.motor_torque,
-                   gear_ratio=j.gear_ratio, link_markers=list(j.link_markers),
+        tab.update(name=j.name, gear_ratio=j.gear_ratio,
                    parent_markers=WORLD if j.parent_is_world else list(j.parent_markers))
+        if rec.controller is not None:
+            tab.update(motor_position=j.motor_position, motor_torque=j.motor_torque)
+        if rec.markers is not None:
+            tab["link_markers"] = list(j.link_markers)
         joints.append(tab)
     doc["joints"] = joints
     if rec.urdf is not None:
@@ -250,14 +276,16 @@ def write_recording(rec: Recording, out_dir: str | os.PathLike[str]) -> Path:
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     doc = recording_spec(rec)
-    write_markers(out / rec.marker_file, rec.markers)
-    cols = {rec.time_column: rec.controller.t}
-    for i, j in enumerate(rec.joints):
-        cols[j.motor_position] = rec.controller.q_m[:, i]
-        cols[j.motor_torque] = rec.controller.tau[:, i]
-    for k, v in rec.controller.extra.items():
-        cols.setdefault(k, v)
-    write_csv_columns(out / rec.controller_file, cols)
+    if rec.markers is not None:
+        write_markers(out / rec.marker_file, rec.markers)
+    if rec.controller is not None:
+        cols = {rec.time_column: rec.controller.t}
+        for i, j in enumerate(rec.joints):
+            cols[j.motor_position] = rec.controller.q_m[:, i]
+            cols[j.motor_torque] = rec.controller.tau[:, i]
+        for k, v in rec.controller.extra.items():
+            cols.setdefault(k, v)
+        write_csv_columns(out / rec.controller_file, cols)
     if rec.urdf is not None:
         target = out / doc["model"]["urdf"]
         if Path(rec.urdf).resolve() != target.resolve():

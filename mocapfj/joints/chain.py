@@ -24,7 +24,7 @@ from scipy.special import erfc
 from scipy.stats import chi2
 
 from ..errors import InputError
-from ._gauss_newton import _Factor, _fk, _gauss_newton, _normal, _subtree_sums
+from .gauss_newton import BatchCholesky, chain_fk, gauss_newton, normal_equations, subtree_sums
 
 __all__ = ["ChainModel", "ChainAngles", "solve_chain"]
 
@@ -187,8 +187,8 @@ class ChainModel:
     def _check_determined(self) -> None:
         """Raise InputError if all markers together cannot determine every joint (zero and random poses)."""
         q = np.hstack([np.zeros((self.n_joints, 1)), np.random.default_rng(0).uniform(-np.pi, np.pi, (self.n_joints, 3))])
-        A, _, _ = _normal(self, q, np.zeros((len(self.labels), 3, 4)), np.ones((len(self.labels), 4)))
-        if not _Factor(A).determined.any():
+        A, _, _ = normal_equations(self, q, np.zeros((len(self.labels), 3, 4)), np.ones((len(self.labels), 4)))
+        if not BatchCholesky(A).determined.any():
             d = np.sqrt(np.maximum(np.diag(A[:, :, 0]), 1e-300))
             _, V = np.linalg.eigh(A[:, :, 0] / np.outer(d, d))
             j = int(np.argmax(np.abs(V[:, 0])))
@@ -207,12 +207,12 @@ class ChainModel:
         -------
         R_world_joint : (T, n, 3, 3);  t_world_joint : (T, n, 3) m
         """
-        R, t, _ = _fk(self, np.atleast_2d(np.asarray(q, dtype=np.float64)).T, with_markers=False)
+        R, t, _ = chain_fk(self, np.atleast_2d(np.asarray(q, dtype=np.float64)).T, with_markers=False)
         return np.moveaxis(R[:-1], 3, 0) @ np.swapaxes(self.P_joint, 1, 2), np.moveaxis(t[:-1], 2, 0)
 
     def marker_positions(self, q) -> np.ndarray:
         """Predicted marker positions y_p(q), (T, M, 3) m, world frame, for angles q (T, n) rad."""
-        return np.moveaxis(_fk(self, np.atleast_2d(np.asarray(q, dtype=np.float64)).T)[2], 2, 0)
+        return np.moveaxis(chain_fk(self, np.atleast_2d(np.asarray(q, dtype=np.float64)).T)[2], 2, 0)
 
 
 # Internals work frame-last: q (n, F), v and y (M, 3, F), w (M, F), so that every operation is an
@@ -351,7 +351,7 @@ def solve_chain(model: ChainModel, v_world, *, t=None, q0=None, sigma: float | N
         return wt
 
     def solvable(wt):  # every joint moves at least one used marker
-        return (_subtree_sums(model, wt[:, None, :])[:, 0] > 0).all(axis=0)
+        return (subtree_sums(model, wt[:, None, :])[:, 0] > 0).all(axis=0)
 
     valid = np.isfinite(v).all(axis=2).T                                                        # (M, T)
     v = np.moveaxis(np.where(np.isfinite(v), v, 0.0), 0, 2)                                     # (M, 3, T)
@@ -367,17 +367,17 @@ def solve_chain(model: ChainModel, v_world, *, t=None, q0=None, sigma: float | N
             idx = np.arange(i0, min(T, i0 + block_frames))[ok[i0:i0 + block_frames]]
             if idx.size:
                 seed = last[:, None] + vel[:, None] * (idx - i_last)
-                qb, _, _, Ab, _ = _gauss_newton(model, seed, v[..., idx], w[:, idx],
+                qb, _, _, Ab, _ = gauss_newton(model, seed, v[..., idx], w[:, idx],
                                                 max_iter * (5 if i0 == 0 else 1), 1e-6)
                 q[:, idx] = qb
-                det = np.flatnonzero(_Factor(Ab).determined)
+                det = np.flatnonzero(BatchCholesky(Ab).determined)
                 if det.size:
                     last, i_last = qb[:, det[-1]], idx[det[-1]]
                     vel = (last - qb[:, det[0]]) / max(i_last - idx[det[0]], 1)
     else:
         q[:] = q0.T
     A, e2 = np.zeros((n, n, T)), np.zeros((len(model.labels), T))
-    q[:, ok], n_it[ok], conv[ok], A[..., ok], e2[:, ok] = _gauss_newton(model, q[:, ok], v[..., ok], w[:, ok],
+    q[:, ok], n_it[ok], conv[ok], A[..., ok], e2[:, ok] = gauss_newton(model, q[:, ok], v[..., ok], w[:, ok],
                                                                          max_iter, tol)
     n_rej = np.zeros(T, np.int64)
     if outlier_sigma is not None:
@@ -399,11 +399,11 @@ def solve_chain(model: ChainModel, v_world, *, t=None, q0=None, sigma: float | N
             bad = bad[ok[bad]]
             e2[:, ~ok] = 0.0
             if bad.size:
-                q[:, bad], it, conv[bad], A[..., bad], e2[:, bad] = _gauss_newton(
+                q[:, bad], it, conv[bad], A[..., bad], e2[:, bad] = gauss_newton(
                     model, q[:, bad], v[..., bad], w[:, bad], max_iter, tol)
                 n_it[bad] += it
 
-    fac = _Factor(A)
+    fac = BatchCholesky(A)
     ok &= fac.determined
     _require_some(ok)
     n_used = w.sum(axis=0)

@@ -29,10 +29,12 @@ from .cameras import ring_rig
 from .markers import DEFAULT_CLUSTERS, MarkerLayout, place_markers
 from .render import render_markers
 from .robot_mesh import base_pose, forward_kinematics, pa10_geometry
-from .scenario import Scenario, joint_models, nominal_parameters, reference_trajectory, _drivetrain, _friction, _spring
+from .scenario import (Scenario, joint_drivetrain, joint_friction, joint_models, joint_spring, nominal_parameters,
+                       reference_trajectory)
 from .urdf import pa10_urdf
 
 __all__ = ["SimulatedRecording", "simulate_scenario", "record_scenario", "write_scenario_bundle", "concealment",
+           "scenario_rngs", "marker_layout",
            "measure_concealment", "angle_sigma"]
 
 
@@ -78,10 +80,10 @@ def simulate_scenario(scn: Scenario, with_effects: bool = True) -> dict[str, Sim
         urdf = scenario_urdf(scn)
         model = NLinkModel.from_urdf(
             urdf, motor_inertia=[j.J for j in scn.joints],
-            springs=[_spring(j, eff[j.name], scn.source) for j in scn.joints],
+            springs=[joint_spring(j, eff[j.name], scn.source) for j in scn.joints],
             motor_damping=[j.b for j in scn.joints],
-            frictions=[_friction(j, eff[j.name], scn.source).with_smoothing(1e-3) for j in scn.joints],
-            drivetrains=[_drivetrain(j, eff[j.name]) for j in scn.joints])
+            frictions=[joint_friction(j, eff[j.name], scn.source).with_smoothing(1e-3) for j in scn.joints],
+            drivetrains=[joint_drivetrain(j, eff[j.name]) for j in scn.joints])
         res = simulate(model, t, _pid(scn, scn.joints), **opts)
         return {j.name: res for j in scn.joints}
     models = joint_models(scn, with_effects)
@@ -191,12 +193,12 @@ def _with_dropouts(m: MarkerTrajectories, rate: float, mean_frames: float, rng) 
     return MarkerTrajectories(t=m.t, xyz=xyz, labels=m.labels, rate_hz=m.rate_hz, residual=res)
 
 
-def _rngs(scn: Scenario):
+def scenario_rngs(scn: Scenario):
     """Independent generators (layout, rig, render, log) from the scenario's seed."""
     return tuple(np.random.default_rng(s) for s in np.random.SeedSequence(scn.seed).spawn(4))
 
 
-def _layout(scn: Scenario, geometry, rng) -> MarkerLayout:
+def marker_layout(scn: Scenario, geometry, rng) -> MarkerLayout:
     rest = forward_kinematics(np.asarray(scn.pose_rad, float), T_world_base=base_pose())
     return place_markers(geometry, rng, clusters=DEFAULT_CLUSTERS, T_world_link_check=rest)
 
@@ -222,8 +224,8 @@ def measure_concealment(scn: Scenario) -> list[dict]:
 
     Gives the same numbers as `record_scenario` (same seed, same marker layout).
     """
-    rng_layout = _rngs(scn)[0]
-    layout = _layout(scn, pa10_geometry(), rng_layout)
+    rng_layout = scenario_rngs(scn)[0]
+    layout = marker_layout(scn, pa10_geometry(), rng_layout)
     _, noise = _noise(scn, layout, [j.link_markers for j in scn.joints])
     _, t_true = _mocap_times(scn)
     return concealment(scn, simulate_scenario(scn), simulate_scenario(scn, with_effects=False), t_true, noise)
@@ -232,7 +234,7 @@ def measure_concealment(scn: Scenario) -> list[dict]:
 def record_scenario(scn: Scenario, *, with_concealment: bool = True) -> SimulatedRecording:
     """Simulate, log, render and assemble the recording of a scenario (in memory)."""
     m = scn.measurement
-    rng_layout, rng_rig, rng_render, rng_log = _rngs(scn)
+    rng_layout, rng_rig, rng_render, rng_log = scenario_rngs(scn)
     timings = {}
 
     tic = time.perf_counter()
@@ -275,7 +277,7 @@ def record_scenario(scn: Scenario, *, with_concealment: bool = True) -> Simulate
         q_full[:, j.axis - 1] = q_true_mocap[:, i]
     T_world_link = forward_kinematics(q_full, T_world_base=base_pose())
     geometry = pa10_geometry()
-    layout = _layout(scn, geometry, rng_layout)
+    layout = marker_layout(scn, geometry, rng_layout)
     rig = ring_rig(m.n_cameras, rng=rng_rig)
     rendering = render_markers(t_mocap, T_world_link, layout, geometry, rig, rng_render, rate_hz=m.mocap_hz,
                                pixel_noise_px=m.pixel_noise_px, noise_m=m.marker_noise_m)
@@ -308,8 +310,8 @@ def record_scenario(scn: Scenario, *, with_concealment: bool = True) -> Simulate
                   "delay_s": _clock_delay(scn)},
         "measurement": {k: getattr(m, k) for k in m.__dataclass_fields__},
         "joints": [{"name": j.name, "axis": j.axis, "nominal": nominal_parameters(j),
-                    "true_friction": element_to_table(_friction(j, scn.effects_on(j.name), scn.source)),
-                    "true_spring": element_to_table(_spring(j, scn.effects_on(j.name), scn.source)),
+                    "true_friction": element_to_table(joint_friction(j, scn.effects_on(j.name), scn.source)),
+                    "true_spring": element_to_table(joint_spring(j, scn.effects_on(j.name), scn.source)),
                     "angle_sigma_rad": sig_q[j.name], "q_m_quantum_rad": float(quantum[i]),
                     "deflection_noise_sd_rad": noise[j.name],
                     "marker_radii_m": [float(r) for r in layout.axis_radius()[[layout.labels.index(s) for s in spec.link_markers]]],

@@ -36,7 +36,7 @@ from ..errors import InputError
 from ..io.tomlio import check_format, read_toml, require
 
 __all__ = ["EFFECTS", "Scenario", "ScenarioJoint", "Measurement", "Effect", "load_scenario", "joint_models",
-           "reference_trajectory"]
+           "reference_trajectory", "joint_friction", "joint_spring", "joint_drivetrain"]
 
 EFFECTS = ("hysteresis", "stiffening", "backlash", "transmission_error", "position_dependent_friction", "stribeck",
            "friction_asymmetry", "time_delay", "coupling", "gravity_mismatch", "drive_gain")
@@ -276,7 +276,8 @@ def reference_trajectory(ref: dict):
     return fn
 
 
-def _friction(j: ScenarioJoint, effects, source):
+def joint_friction(j: ScenarioJoint, effects, source):
+    """The friction element of a scenario joint with the given effects planted."""
     fr = element_from_table(j.friction, FRICTION_MODELS, source, f"joints[{j.name}].friction")
     for e in effects:
         if e.name in ("stribeck", "friction_asymmetry"):
@@ -290,7 +291,8 @@ def _friction(j: ScenarioJoint, effects, source):
     return fr
 
 
-def _spring(j: ScenarioJoint, effects, source):
+def joint_spring(j: ScenarioJoint, effects, source):
+    """The spring element of a scenario joint with the given effects planted."""
     sp = element_from_table(j.spring, SPRING_MODELS, source, f"joints[{j.name}].spring")
     for e in effects:
         if e.name in ("hysteresis", "stiffening"):
@@ -301,7 +303,8 @@ def _spring(j: ScenarioJoint, effects, source):
     return sp
 
 
-def _drivetrain(j: ScenarioJoint, effects) -> Drivetrain:
+def joint_drivetrain(j: ScenarioJoint, effects) -> Drivetrain:
+    """The drivetrain of a scenario joint with the given effects planted."""
     te = bal = None
     gain = 1.0
     for e in effects:
@@ -327,9 +330,9 @@ def joint_models(scn: Scenario, with_effects: bool = True, smoothing: float = 1e
     out = {}
     for j in scn.joints:
         eff = scn.effects_on(j.name) if with_effects else ()
-        fr = _friction(j, eff, scn.source).with_smoothing(smoothing)
-        out[j.name] = SingleJoint(I=j.I, J=j.J, spring=_spring(j, eff, scn.source), mglx=j.mglx, mgly=j.mgly, b=j.b,
-                                  friction=fr, drivetrain=_drivetrain(j, eff), name=j.name)
+        fr = joint_friction(j, eff, scn.source).with_smoothing(smoothing)
+        out[j.name] = SingleJoint(I=j.I, J=j.J, spring=joint_spring(j, eff, scn.source), mglx=j.mglx, mgly=j.mgly, b=j.b,
+                                  friction=fr, drivetrain=joint_drivetrain(j, eff), name=j.name)
     return out
 
 

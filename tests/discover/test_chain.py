@@ -25,10 +25,10 @@ def _bundle(tmp_path_factory, path: Path, duration: float) -> Path:
 
 def _search(bundle: Path, model: Path, out: Path):
     """Discovery's search alone (no output-error simulation), on the bundle's signals."""
+    import mocapfj
     from mocapfj.discover import discover, read_model_file
-    from mocapfj.pipeline import _discovery_signals
 
-    _, sig = _discovery_signals(bundle, out)
+    sig = mocapfj.signals(bundle)
     models = read_model_file(model)
     return discover(sig, {n: models[n] for n in sig}, fs_hz=250.0, simulate=False)
 

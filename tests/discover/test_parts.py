@@ -59,7 +59,7 @@ def test_position_torque_is_its_series():
 
 def test_bad_input(tmp_path):
     t = np.arange(3000) / 250.0
-    sig = {"j2": JointSignals(t, 0.1 * np.sin(t), 0.1 * np.sin(t), np.sin(t))}
+    sig = {"j2": JointSignals(t, 0.1 * np.sin(t), 0.1 * np.sin(t), np.sin(t), fs_hz=250.0, name="j2")}
     models = read_model_file(ROOT / "datasets" / "pa10_joint2.toml")
     with pytest.raises(InputError, match="effects: expected names from"):
         discover(sig, models, fs_hz=250.0, effects=("friction_waves",))

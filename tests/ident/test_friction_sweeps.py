@@ -309,7 +309,8 @@ def test_unexcited_stribeck_region_shows_in_the_std():
         fit = fit_stribeck(v, STAUBLI.torque(v) + np.random.default_rng(0).normal(0.0, noise, v.size))
         for side in ("pos", "neg"):
             vs, sd = fit.params[f"vs_{side}"], fit.std[f"vs_{side}"]
-            assert vs > 0.2 and sd > 0.25 * vs, (side, noise, vs, sd)
+            # vs drifts far from the true 0.009 rad/s (the data cannot place it) and its SD says so
+            assert vs > 10 * 0.009 and sd > 0.25 * vs, (side, noise, vs, sd)
     # the well-excited sweep of test_fit_stribeck_std_matches_monte_carlo: vs to 1 %
     v = two_sided(16, 0.002, 0.5)
     fit = fit_stribeck(v, STAUBLI.torque(v) + np.random.default_rng(0).normal(0.0, 0.1, v.size))

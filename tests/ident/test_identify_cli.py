@@ -53,12 +53,12 @@ def test_identify_json_table_and_cv(three_trials, capsys):
     assert (root / "out" / "table.csv").read_text().splitlines()[0] == "joint,statistic,I,c,v,mglx,mgly,b,J,k,error"
 
 
-def test_identify_seed_method_reports_its_own_step1(three_trials, capsys):
-    """--method seed: seed 000's step 1 (eq. 6) as published; through mocap it gets gravity and
-    Coulomb friction right (the link/motor split it cannot: tests/ident/test_twostep.py)."""
+def test_identify_two_step_method_reports_its_own_step1(three_trials, capsys):
+    """--method two_step: Lightcap and Banks' step 1 (eq. 6) as published; through mocap it gets
+    gravity and Coulomb friction right (the link/motor split it cannot: tests/ident/test_twostep.py)."""
     root, paths = three_trials
-    assert main(["identify", str(paths[0]), "--out", str(root / "seed"), "--method", "seed", "--json"]) == 0
+    assert main(["identify", str(paths[0]), "--out", str(root / "two_step"), "--method", "two_step", "--json"]) == 0
     (j,) = json.loads(capsys.readouterr().out)["joints"]
-    assert j["method"] == "seed" and "cv_pct" not in j
+    assert j["method"] == "two_step" and "cv_pct" not in j
     for n in ("mglx", "mgly", "c"):
         assert j["params"][n]["value"] == pytest.approx(TABLE1_J2[n], rel=0.02), n

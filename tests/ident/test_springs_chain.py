@@ -23,7 +23,7 @@ RIGID = dict(I=6.15, mglx=111.64, mgly=-7.80, c=9.28, v=18.38, J=12.57, b=23.28)
 
 @pytest.fixture(scope="module", params=sorted(SPRINGS))
 def identified(request, tmp_path_factory):
-    from mocapfj.pipeline import identify_signals, joint_signals, run_joints
+    import mocapfj
     from mocapfj.synth.record import record_scenario, write_scenario_bundle
     from mocapfj.synth.scenario import load_scenario
 
@@ -33,20 +33,19 @@ def identified(request, tmp_path_factory):
     (d / "scenario.toml").write_text(text.replace(LINEAR, SPRINGS[request.param]))
     sr = record_scenario(load_scenario(d / "scenario.toml").with_duration(30.0), with_concealment=False)
     write_scenario_bundle(sr, d / "bundle")
-    run_joints(d / "bundle", d / "out")
-    t, q, q_m, u, _ = joint_signals(sr.recording, d / "out" / "j2.angles.csv", 0)
-    res = identify_signals(t, q, q_m, u, 250.0)
-    print(request.param, res["spring"], {n: round(100 * (res["values"][n][0] / v - 1), 2) for n, v in RIGID.items()})
-    return request.param, res, q_m - q
+    s = mocapfj.signals(d / "bundle")["j2"]
+    res = mocapfj.identify_joint(s.t, s.q, s.q_m, s.u, fs_hz=s.fs_hz)
+    print(request.param, res.spring.to_dict(), {n: round(100 * (res[n] / v - 1), 2) for n, v in RIGID.items()})
+    return request.param, res, s.q_m - s.q
 
 
 def test_the_planted_spring_is_selected_and_its_coefficients_recovered(identified):
     """Measured: cubic k1 +0.2 %, k3 -5.6 %; Bouc-Wen k -0.04 %, alpha 0.702, beta 280, gamma 332
     (beta + gamma, which sets the loop's saturation, +2.0 %)."""
     name, res, _ = identified
-    s = res["spring"]
-    assert s["model"] == name
-    p = s["params"]
+    s = res.spring
+    assert s.model == name
+    p = s.params
     if name == "cubic":
         assert p["k1"] == pytest.approx(1.19e4, rel=0.02)
         assert p["k3"] == pytest.approx(4.6e7, rel=0.15)
@@ -71,7 +70,7 @@ def test_the_hysteresis_loop_dissipates_the_true_energy(identified):
         tau = alpha * k * d + (1 - alpha) * k * bouc_wen_states(d, 1.0, beta, gamma)
         return float(np.sum(0.5 * (tau[1:] + tau[:-1]) * np.diff(d)))
 
-    fit = energy(**res["spring"]["params"])
+    fit = energy(**res.spring.params)
     true = energy(1.19e4, 0.7, 300.0, 300.0)
     print("dissipated energy, fit vs true (J):", fit, true)
     assert true > 0 and fit == pytest.approx(true, rel=0.10)
@@ -82,7 +81,7 @@ def test_rigid_parameters_stay_close_with_a_nonlinear_spring(identified):
     absorb it. Measured: cubic I -5.0, J +1.9, b -1.6 %; Bouc-Wen I -1.4, J +2.9, b -1.0 %;
     gravity and Coulomb within 0.7 %. (30 s each; the 60 s linear trial is within 2 %.)"""
     _, res, _ = identified
-    err = {n: 100 * (res["values"][n][0] / v - 1) for n, v in RIGID.items()}
+    err = {n: 100 * (res[n] / v - 1) for n, v in RIGID.items()}
     for n in ("mglx", "mgly", "c", "v", "J", "b"):
         assert abs(err[n]) < 4.0, (n, err[n])
     assert abs(err["I"]) < 7.0, err["I"]

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from mocapfj import InputError
-from mocapfj.ident.twostep import identify_joint
+from mocapfj.ident.twostep import identify_two_step
 
 ROOT = Path(__file__).resolve().parents[2]
 # seed 000 Table I, joint 2 means (the pa10_joint2 scenario's true parameters)
@@ -31,7 +31,7 @@ def _rel_err(result, ref):
 
 def test_true_signals_recover_table1_joint2_and_two_step_is_better_conditioned(recorded):
     r = recorded.sim["j2"]
-    res = identify_joint(r.t, r.q[:, 0], r.q_m[:, 0], r.u[:, 0], fs_hz=1000.0)
+    res = identify_two_step(r.t, r.q[:, 0], r.q_m[:, 0], r.u[:, 0], fs_hz=1000.0)
     err = _rel_err(res.step1, TABLE1_J2)
     print("step 1 error %:", {k: round(v, 3) for k, v in err.items()}, "k:", res.spring["k"],
           "cond two/one:", res.cond_two_step, res.cond_one_step)
@@ -49,15 +49,15 @@ def test_true_signals_recover_table1_joint2_and_two_step_is_better_conditioned(r
 
 @pytest.fixture(scope="module")
 def chain(recorded, tmp_path_factory):
-    from mocapfj.pipeline import joint_signals, run_joints
+    import mocapfj
     from mocapfj.synth.record import write_scenario_bundle
 
     d = tmp_path_factory.mktemp("twostep")
     write_scenario_bundle(recorded, d / "bundle")
-    run_joints(d / "bundle", d / "out")
     # the 1 kHz log onto the 250 Hz mocap clock, the (rare) occluded frames filled
-    t, q, q_m, u, n_filled = joint_signals(recorded.recording, d / "out" / "j2.angles.csv", 0)
-    res = identify_joint(t, q, q_m, u, fs_hz=250.0, cutoff_hz=10.0, decimate=2)
+    s = mocapfj.signals(d / "bundle")["j2"]
+    t, q, q_m, u, n_filled = s.t, s.q, s.q_m, s.u, s.n_filled
+    res = identify_two_step(t, q, q_m, u, fs_hz=250.0, cutoff_hz=10.0, decimate=2)
     err = _rel_err(res.step1, TABLE1_J2)
     err["k (two-step)"] = 100.0 * (res.spring["k"] / K_J2 - 1.0)
     err["k (one-step)"] = 100.0 * (res.one_step["k"] / K_J2 - 1.0)
@@ -95,34 +95,34 @@ def test_rigid_joint_does_not_excite_the_link_motor_split():
     qd, qdd = np.gradient(q, t), np.gradient(np.gradient(q, t), t)
     u = 18.72 * qdd - 111.64 * np.sin(q) - 7.8 * np.cos(q) + 9.28 * np.tanh(qd / 1e-3) + 41.66 * qd
     with pytest.raises(InputError, match=r"no independent excitation of \['(I|J)', '(v|b)'\]|'(v|b)', '(I|J)'"):
-        identify_joint(t, q, q.copy(), u, fs_hz=1000.0)
+        identify_two_step(t, q, q.copy(), u, fs_hz=1000.0)
 
 
 def test_bad_input_is_refused():
     t = np.arange(1000) / 1000.0
     q = np.sin(t)
     with pytest.raises(InputError, match="uniform"):
-        identify_joint(t, q, q, q, fs_hz=250.0)
+        identify_two_step(t, q, q, q, fs_hz=250.0)
     qn = q.copy()
     qn[5] = np.nan
     with pytest.raises(InputError, match="q: expected finite"):
-        identify_joint(t, qn, q, q, fs_hz=1000.0)
+        identify_two_step(t, qn, q, q, fs_hz=1000.0)
     with pytest.raises(InputError, match="four"):
-        identify_joint(t, q[:-1], q, q, fs_hz=1000.0)
+        identify_two_step(t, q[:-1], q, q, fs_hz=1000.0)
 
 
 @pytest.fixture(scope="module")
 def chain_60s(tmp_path_factory):
     """The full 60 s pa10_joint2 recording through mocapfj joints (the issue's acceptance data)."""
-    from mocapfj.pipeline import joint_signals, run_joints
+    import mocapfj
     from mocapfj.synth.record import record_scenario, write_scenario_bundle
     from mocapfj.synth.scenario import load_scenario
 
     d = tmp_path_factory.mktemp("motorfirst")
     sr = record_scenario(load_scenario(ROOT / "datasets" / "pa10_joint2.toml"), with_concealment=False)
     write_scenario_bundle(sr, d / "bundle")
-    run_joints(d / "bundle", d / "out")
-    return joint_signals(sr.recording, d / "out" / "j2.angles.csv", 0)[:4]
+    s = mocapfj.signals(d / "bundle")["j2"]
+    return s.t, s.q, s.q_m, s.u
 
 
 def test_motor_first_identifies_every_parameter_through_the_full_chain(chain_60s):
@@ -132,9 +132,9 @@ def test_motor_first_identifies_every_parameter_through_the_full_chain(chain_60s
     J +0.47, b -1.55, k +0.16 %. (On true angles every parameter is within 0.35 %; what is left
     is the mocap angle's noise below 1 Hz, 46 urad RMS, which moves J and b by about 1 % from
     trial to trial and I twice that: benchmarks/bench_identify.py measures ten trials.)"""
-    from mocapfj.ident.motorfirst import identify_joint_motor_first
+    from mocapfj.ident.motorfirst import identify_motor_first
 
-    res = identify_joint_motor_first(*chain_60s, fs_hz=250.0)
+    res = identify_motor_first(*chain_60s, fs_hz=250.0)
     err = {n: 100.0 * (res[n] / v - 1.0) for n, v in {**TABLE1_J2, "k": K_J2}.items()}
     print("motor-first, full chain, error %:", {k: round(v, 2) for k, v in err.items()})
     assert all(abs(v) < 2.0 for v in err.values()), err
@@ -146,11 +146,11 @@ def test_motor_first_identifies_every_parameter_through_the_full_chain(chain_60s
 def test_motor_first_recovers_the_true_parameters_from_true_signals(recorded):
     """Without measurement noise the method has no bias of its own: every parameter within 0.5 %
     (measured: I +0.32, v -0.11, the rest within 0.06 %)."""
-    from mocapfj.ident.motorfirst import identify_joint_motor_first
+    from mocapfj.ident.motorfirst import identify_motor_first
 
     r = recorded.sim["j2"]
     t = r.t[::4]
-    res = identify_joint_motor_first(t, r.q[::4, 0], r.q_m[::4, 0], r.u[::4, 0], fs_hz=250.0)
+    res = identify_motor_first(t, r.q[::4, 0], r.q_m[::4, 0], r.u[::4, 0], fs_hz=250.0)
     for n, v in {**TABLE1_J2, "k": K_J2}.items():
         assert res[n] == pytest.approx(v, rel=0.005), n
 
@@ -159,5 +159,5 @@ def test_motor_first_refuses_a_recording_too_short_for_its_filters():
     t = np.arange(500) / 250.0
     q = 0.1 * np.sin(t)
     with pytest.raises(InputError, match=r"t: expected at least \d+ samples .* for the filters"):
-        from mocapfj.ident.motorfirst import identify_joint_motor_first
-        identify_joint_motor_first(t, q, q, q, fs_hz=250.0)
+        from mocapfj.ident.motorfirst import identify_motor_first
+        identify_motor_first(t, q, q, q, fs_hz=250.0)

@@ -11,7 +11,8 @@ import pytest
 from mocapfj.cli import main
 from mocapfj.io import read_c3d, read_csv_columns
 from mocapfj.joints import fit_halvorsen, fit_hinge_ml, kabsch
-from mocapfj.pipeline import markers_in_parent_frame, run_joints
+from mocapfj.joints import auto_calibrate_joint, calibrate_joint, markers_in_parent_frame
+from mocapfj.pipeline import run_joints
 from mocapfj.synth.record import record_scenario, write_scenario_bundle
 from mocapfj.synth.scenario import load_scenario
 
@@ -95,12 +96,10 @@ def test_real_elbow_and_knee(realdata, case):
     from scipy.spatial.transform import Rotation
 
     from mocapfj.joints import cluster_template
-    from mocapfj.pipeline import calibrate_joint
-
     name, parent, child, published, axis_tol = case
     m = read_c3d(realdata / "c3d_samples" / name)
-    v, _, static = markers_in_parent_frame(m.select(child), m.select(parent))
-    assert not static
+    v, frame = markers_in_parent_frame(m.select(child), m.select(parent))
+    assert not frame.static and frame.R_world_parent is None
     n = v.shape[0] // 2
     g1, _ = calibrate_joint(v[:n], child, m.t[:n], "sara")
     g2, _ = calibrate_joint(v[n:], child, m.t[n:], "sara")
@@ -123,7 +122,7 @@ def test_ml_is_refused_or_poor_where_the_hinge_does_not_hold(realdata):
     pipeline fits moving-parent joints by SARA (the numbers are reported, not hidden)."""
     name, parent, child, _, _ = REAL[0]
     m = read_c3d(realdata / "c3d_samples" / name)
-    v, _, _ = markers_in_parent_frame(m.select(child), m.select(parent))
+    v, _ = markers_in_parent_frame(m.select(child), m.select(parent))
     g, _ = fit_hinge_ml(v, init=fit_halvorsen(v))
     assert g.marker_rms > 0.01
 
@@ -146,25 +145,32 @@ def test_too_little_motion_is_one_clear_line(tmp_path, capsys):
 
 
 def test_auto_chooses_sara_only_where_the_markers_are_not_a_hinge(realdata):
-    from mocapfj.pipeline import auto_calibrate_joint
-
     name, parent, child, _, _ = REAL[0]
     m = read_c3d(realdata / "c3d_samples" / name)
-    v, _, _ = markers_in_parent_frame(m.select(child), m.select(parent))
+    v, _ = markers_in_parent_frame(m.select(child), m.select(parent))
     assert auto_calibrate_joint(v, child, m.t)[0].method == "sara"
 
 
 def test_axis_in_the_world_is_within_its_reported_uncertainty(pa10_joint2):
-    """Joint 2's true axis is the world y axis (PA-10 modified D-H, joint 1 at zero)."""
+    """Joint 2's true axis is the world y axis (PA-10 modified D-H, joint 1 at zero); the parent
+    (link 1, braked) is static, so the JSON gives the axis in the world too, and the TOML's axis in
+    the parent's frame, taken to the world with the parent's stored template, agrees with it."""
     from mocapfj.io import load_recording
     from mocapfj.io.geometry import read_joint_geometry
 
-    _, _, root = pa10_joint2
+    _, summary, root = pa10_joint2
+    (j,) = summary["joints"]
     rec = load_recording(root / "bundle")
     _, g, parent = read_joint_geometry(root / "out" / "j2.joint.toml")
-    R, _, _ = kabsch(np.asarray(parent["template_m"]), np.nanmean(rec.markers.select(parent["labels"]), axis=0)[None])
+    R, t, _ = kabsch(np.asarray(parent["template_m"]), np.nanmean(rec.markers.select(parent["labels"]), axis=0)[None])
     axis_world = R[0] @ g.axis
+    assert np.allclose(j["axis_world"], axis_world, atol=1e-12)
+    assert np.allclose(j["point_world_m"], R[0] @ g.point + t[0], atol=1e-12)
     err = np.arccos(min(1.0, abs(axis_world[1])))
     sd = np.sqrt(np.trace(g.cov_axis))
     assert err < 3 * sd, (np.degrees(err), np.degrees(sd))
     assert np.degrees(sd) < 0.01
+    # the two marker RMS values say what they measure: the fit's over every marker, and the angle
+    # solve's over the markers it kept; the TOML holds the fit's
+    assert j["fit_marker_rms_mm"] == pytest.approx(g.marker_rms * 1e3)
+    assert j["angle_marker_rms_mm"] == j["marker_rms_mm"] <= j["fit_marker_rms_mm"] * 1.05

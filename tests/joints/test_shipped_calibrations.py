@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from mocapfj.io.geometry import read_joint_geometry
-from mocapfj.synth.record import _layout, _rngs
+from mocapfj.synth.record import marker_layout, scenario_rngs
 from mocapfj.synth.robot_mesh import pa10_geometry
 from mocapfj.synth.scenario import load_scenario
 
@@ -20,7 +20,7 @@ FILES = sorted((ROOT / "calibration").glob("pa10_*/*.joint.toml"))
 def test_radii_match_the_true_marker_layout(path):
     scn = load_scenario(ROOT / "datasets" / f"{path.parent.name}.toml")
     name, g, parent = read_joint_geometry(path)
-    layout = _layout(scn, pa10_geometry(), _rngs(scn)[0])
+    layout = marker_layout(scn, pa10_geometry(), scenario_rngs(scn)[0])
     true = layout.axis_radius()[[layout.labels.index(s) for s in g.labels]]
     np.testing.assert_allclose(g.radii, true, atol=1e-3)
     assert list(g.labels) == list(scn.joint(name).link_markers)

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from mocapfj.io import load_recording, read_csv_columns
-from mocapfj.synth.record import _layout, _rngs, measure_concealment, record_scenario, write_scenario_bundle
+from mocapfj.synth.record import marker_layout, scenario_rngs, measure_concealment, record_scenario, write_scenario_bundle
 from mocapfj.synth.markers import marker_positions
 from mocapfj.synth.robot_mesh import base_pose, forward_kinematics, pa10_geometry
 from mocapfj.synth.scenario import load_scenario
@@ -30,7 +30,7 @@ def _marker_error(sr, scn, t_ctrl) -> np.ndarray:
     q = np.interp(t_ctrl, r.t, r.q[:, 0])
     q_full = np.tile(np.asarray(scn.pose_rad), (q.size, 1))
     q_full[:, 1] = q
-    layout = _layout(scn, pa10_geometry(), _rngs(scn)[0])
+    layout = marker_layout(scn, pa10_geometry(), scenario_rngs(scn)[0])
     p = marker_positions(layout, forward_kinematics(q_full, T_world_base=base_pose()))
     return sr.recording.markers.xyz - p
 

@@ -1,14 +1,12 @@
-"""The batched numerical core of `chain`: forward kinematics, normal equations, Cholesky and
-Gauss-Newton over many frames at once (no per-frame Python loop). Private to `mocapfj.joints`."""
+"""The batched numerical core of :mod:`.chain`: forward kinematics, normal equations, Cholesky and
+Gauss-Newton over many frames at once (no per-frame Python loop). Its functions take a
+:class:`.chain.ChainModel` (duck-typed here: this module does not import `chain`)."""
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
-
 import numpy as np
 
-if TYPE_CHECKING:  # pragma: no cover
-    from .chain import ChainModel
+__all__ = ["chain_fk", "subtree_sums", "normal_equations", "BatchCholesky", "gauss_newton", "evaluate_chain"]
 
 _RCOND = 1e-10      # smallest Cholesky pivot of the Jacobi-scaled normal matrix of a solvable frame
 _MAX_STEP = 0.5     # rad: Gauss-Newton steps are scaled down to at most this per joint
@@ -16,7 +14,7 @@ _CHUNK = 1024       # frames per batch: keeps the working arrays in cache
 _CHORD = 1e-3       # rad: below this step size Gauss-Newton keeps the normal matrix (chord method)
 
 
-def _fk(model: ChainModel, q: np.ndarray, with_markers: bool = True):
+def chain_fk(model, q: np.ndarray, with_markers: bool = True):
     """Axis-aligned joint frames in the world, R (n+1, 3, 3, F), t (n+1, 3, F) (slot n is the
     root), and marker positions y (M, 3, F): R_j = R_parent G_j Rz(q_j), t_j = R_parent g_j + t_parent."""
     n, F = q.shape
@@ -41,13 +39,13 @@ def _fk(model: ChainModel, q: np.ndarray, with_markers: bool = True):
     return R, t, y
 
 
-def _cross(a, b):
+def batched_cross(a, b):
     """Cross product along axis 1 of (K, 3, F) arrays."""
     return np.stack([a[:, 1] * b[:, 2] - a[:, 2] * b[:, 1], a[:, 2] * b[:, 0] - a[:, 0] * b[:, 2],
                      a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]], axis=1)
 
 
-def _subtree_sums(model: ChainModel, X: np.ndarray) -> np.ndarray:
+def subtree_sums(model, X: np.ndarray) -> np.ndarray:
     """Sums of X (M, K, F) over the markers each joint moves, (n, K, F): per link group, then
     accumulated from the leaves to the root (no BLAS: threaded tiny products stall on busy cores)."""
     out = np.zeros((model.n_joints,) + X.shape[1:])
@@ -59,7 +57,7 @@ def _subtree_sums(model: ChainModel, X: np.ndarray) -> np.ndarray:
     return out
 
 
-def _normal(model: ChainModel, q, v, w, with_A: bool = True):
+def normal_equations(model, q, v, w, with_A: bool = True):
     """Gauss-Newton normal equations of seed 000 eq. (13) with marker weights w (M, F).
 
     A = J^T W J and b = J^T W (v - y), with J_mj = n_j x (y_m - o_j) for the joints j upstream of
@@ -71,7 +69,7 @@ def _normal(model: ChainModel, q, v, w, with_A: bool = True):
 
     Returns A (n, n, F) (None unless `with_A`), b (n, F) and the residuals r (M, 3, F) = v - y.
     """
-    R, t, y = _fk(model, q)
+    R, t, y = chain_fk(model, q)
     n, F = q.shape
     M = y.shape[0]
     r = v - y
@@ -80,8 +78,8 @@ def _normal(model: ChainModel, q, v, w, with_A: bool = True):
     o = t[:n] - cen                                                       # (n, 3, F) joint origins
     nz = R[:n, :, 2]                                                      # (n, 3, F) world axes
     rw = r * w[:, None]
-    yr = _subtree_sums(model, np.concatenate([_cross(yc, rw), rw], axis=1))
-    b = (nz * (yr[:, :3] - _cross(o, yr[:, 3:]))).sum(1)                 # (n, F); yr: sums of y x r, r
+    yr = subtree_sums(model, np.concatenate([batched_cross(yc, rw), rw], axis=1))
+    b = (nz * (yr[:, :3] - batched_cross(o, yr[:, 3:]))).sum(1)                 # (n, F); yr: sums of y x r, r
     if not with_A:
         return None, b, r
     feat = np.empty((M, 10, F))                           # w [1, y, yx yx, yy yy, yz yz, yx yy, yx yz, yy yz]
@@ -90,7 +88,7 @@ def _normal(model: ChainModel, q, v, w, with_A: bool = True):
     feat[:, 4:7] = feat[:, 1:4] * yc
     feat[:, 7:9] = feat[:, 1:2] * yc[:, 1:3]
     feat[:, 9] = feat[:, 2] * yc[:, 2]
-    mom = _subtree_sums(model, feat)                                      # (n, 10, F)
+    mom = subtree_sums(model, feat)                                      # (n, 10, F)
     jj, kk = np.triu_indices(n)                                           # pairs j <= k; A is symmetric
     up = model.moves_joint
     rel = up[kk, jj] | up[jj, kk]                                         # markers moved by both: those of
@@ -109,7 +107,7 @@ def _normal(model: ChainModel, q, v, w, with_A: bool = True):
     return A, b, r
 
 
-class _Factor:
+class BatchCholesky:
     """Cholesky factor of the Jacobi-scaled normal matrices C = S A S (S = diag(A)^-1/2) of many
     frames, computed elementwise over frames (A (n, n, F)); a 1e-12 ridge keeps frames that do not
     determine every joint finite. `determined`: all diag(A) > 0 and every pivot of C > _RCOND."""
@@ -129,9 +127,9 @@ class _Factor:
         self.L, self.piv = L, piv
         self.determined = (d > 0).all(axis=0) & (piv.min(axis=0) > _RCOND)
 
-    def take(self, idx) -> _Factor:
+    def take(self, idx) -> BatchCholesky:
         """The factors of frames `idx`."""
-        f = object.__new__(_Factor)
+        f = object.__new__(BatchCholesky)
         f.s, f.L, f.piv, f.determined = self.s[:, idx], self.L[..., idx], self.piv[:, idx], self.determined[idx]
         return f
 
@@ -156,11 +154,11 @@ class _Factor:
         return (X * X).sum(0) * self.s**2
 
 
-def _chunks(F: int):
+def frame_chunks(F: int):
     return (slice(i, min(F, i + _CHUNK)) for i in range(0, F, _CHUNK))
 
 
-def _gauss_newton(model, q, v, w, max_iter, tol):
+def gauss_newton(model, q, v, w, max_iter, tol):
     """Batched Gauss-Newton from q (n, F) on v (M, 3, F), w (M, F), in cache-sized chunks of frames;
     only unconverged frames are re-evaluated. Steps solve the Jacobi-scaled normal equations and
     are scaled down to at most _MAX_STEP rad. Once a frame's step is below _CHORD rad its normal
@@ -177,7 +175,7 @@ def _gauss_newton(model, q, v, w, max_iter, tol):
     conv = np.zeros(F, bool)
     A_last = np.empty((n, n, F))
     e2 = np.empty(w.shape)
-    for sl in _chunks(F):
+    for sl in frame_chunks(F):
         act = np.arange(sl.start, sl.stop)                                # frames still iterating
         fac = None                                                        # factors of the chunk's frames
         prev = np.full(act.size, np.inf)                                  # last step of each frame
@@ -190,11 +188,11 @@ def _gauss_newton(model, q, v, w, max_iter, tol):
                 if sel.size == 0:
                     continue
                 a = act[sel]
-                A, b, r = _normal(model, q[:, a], v[..., a], w[:, a], with_A=bool(full[sel[0]]))
+                A, b, r = normal_equations(model, q[:, a], v[..., a], w[:, a], with_A=bool(full[sel[0]]))
                 e2[:, a] = (r * r).sum(axis=1) * w[:, a]
                 if A is not None:
                     A_last[..., a] = A
-                    f = _Factor(A)
+                    f = BatchCholesky(A)
                     if fac is None:                                       # first iteration: every frame
                         fac = f
                     else:
@@ -210,16 +208,16 @@ def _gauss_newton(model, q, v, w, max_iter, tol):
             conv[act[done]] = True
             act, prev = act[~done], step[~done]
     if not conv.all():
-        A_last[..., ~conv], e2[:, ~conv] = _evaluate(model, q[:, ~conv], v[..., ~conv], w[:, ~conv])
+        A_last[..., ~conv], e2[:, ~conv] = evaluate_chain(model, q[:, ~conv], v[..., ~conv], w[:, ~conv])
     return q, n_it, conv, A_last, e2
 
 
-def _evaluate(model, q, v, w):
+def evaluate_chain(model, q, v, w):
     """Normal matrix A (n, n, F) and weighted squared marker residuals w |v - y|^2 (M, F), chunked."""
     F = q.shape[1]
     A = np.empty((q.shape[0], q.shape[0], F))
     e2 = np.empty(w.shape)
-    for sl in _chunks(F):
-        A[..., sl], _, r = _normal(model, q[:, sl], v[..., sl], w[:, sl])
+    for sl in frame_chunks(F):
+        A[..., sl], _, r = normal_equations(model, q[:, sl], v[..., sl], w[:, sl])
         e2[:, sl] = (r * r).sum(axis=1) * w[:, sl]
     return A, e2

@@ -1,0 +1,141 @@
+"""Identification of one flexible joint from its signals on one clock: the method chosen, its
+spring model selected, and the result as an :class:`~.result.IdentifiedJoint`.
+
+Methods (docs/identification.md):
+
+- ``"motor_first"``: the motor equation first, then the link equation on a rebuilt link angle
+  (:mod:`.motorfirst`).
+- ``"two_step"``: Lightcap and Banks (2007) §II.A, eq. (5)-(7) (:mod:`.twostep`).
+
+Lightcap and Banks' two-step and one-step formulations always run too: their condition numbers
+(``cond_two_step``, ``cond_one_step``) and the one-step k are reported whatever the method.
+"""
+
+from __future__ import annotations
+
+
+from ..dynamics import CoulombViscous, JointModel, LinearSpring
+from ..errors import InputError
+from ..types import JointSignals
+from .conditioning import lowpass
+from .result import PARAMETER_NAMES, IdentifiedJoint, Parameter, SpringResult
+from .springs import HYSTERETIC, SPRING_FITTERS, bouc_wen_states, select_spring_model
+
+__all__ = ["IDENTIFY_METHODS", "identify_joint", "identify_signals", "spring_pairs"]
+
+IDENTIFY_METHODS = ("motor_first", "two_step")
+
+
+def spring_pairs(delta, tau_s, t, fs_hz: float, cutoff_hz: float = 10.0, rate_hz: float = 50.0):
+    """(delta, tau_s, t) for spring selection: both low-passed at `cutoff_hz` (mocap noise in
+    delta would otherwise hide a 10 % nonlinearity) and kept at `rate_hz` (nearly independent
+    samples; the hysteresis fits are 5x cheaper)."""
+    stride = max(1, int(round(fs_hz / rate_hz)))
+    return lowpass(delta, fs_hz, cutoff_hz)[::stride], lowpass(tau_s, fs_hz, cutoff_hz)[::stride], t[::stride]
+
+
+def _selected(sel) -> SpringResult:
+    c = sel.chosen
+    return SpringResult(model=c.model, params={k: float(v) for k, v in c.params.items()}, element=c.element,
+                        r2=sel.r2, holdout_rms_Nm=sel.holdout_rms)
+
+
+def _hysteretic_spring(h: dict, delta, tau_s, t, fs_hz: float) -> SpringResult:
+    """The Bouc-Wen spring a motor equation found, with its r2 on the spring pairs."""
+    from ..dynamics import BoucWen
+
+    d, tau, _ = spring_pairs(delta, tau_s, t, fs_hz)
+    pred = h["alpha"] * h["k"] * d + (1 - h["alpha"]) * h["k"] * bouc_wen_states(d, 1.0, h["beta"], h["gamma"])
+    r = tau - pred
+    r -= r.mean()                                             # the torque offset
+    dev = tau - tau.mean()
+    params = {n: h[n] for n in ("k", "alpha", "beta", "gamma")}
+    return SpringResult(model="bouc_wen", params=params, element=BoucWen(**params), r2=float(1 - (r @ r) / (dev @ dev)),
+                        motor_rms_gain_pct=h["rms_gain_pct"])
+
+
+def _model(name: str, gear_ratio: float, p: dict, spring: SpringResult) -> JointModel:
+    """The identified JointModel: the chosen spring when it is an element the simulator runs,
+    else the linear spring of the same stiffness."""
+    element = spring.element if spring.element is not None else LinearSpring(k=p["k"])
+    if spring.model == "linear":
+        element = LinearSpring(k=p["k"])
+    return JointModel(name=name or "joint", gear_ratio=gear_ratio, I=p["I"], J=p["J"], mglx=p["mglx"], mgly=p["mgly"],
+                      b=p["b"], friction=CoulombViscous(c=p["c"], v=p["v"]), spring=element)
+
+
+def identify_joint(t, q, q_m, u, *, fs_hz: float, method: str = "motor_first", cutoff_hz: float | None = None,
+                   decimate: int = 2, spring_models=None, name: str = "", gear_ratio: float = 1.0,
+                   frames_filled: int = 0, recording: str = "") -> IdentifiedJoint:
+    """Identify one joint from its signals on one clock (docs/identification.md).
+
+    Parameters
+    ----------
+    t, q, q_m, u : (T,) float
+        Times (s, uniform at fs_hz), link angle from mocap (rad), motor angle / gear ratio (rad),
+        motor torque x gear ratio (N m): the link side (docs/conventions.md).
+    fs_hz : float
+    method : one of IDENTIFY_METHODS.
+    cutoff_hz : float, optional
+        The two-step method's low-pass on the angles (default 10 Hz); the other methods use their
+        documented defaults.
+    decimate : int
+        Parallel decimation factor.
+    spring_models : sequence of str, optional
+        Spring models to select among (:data:`.springs.SPRING_FITTERS`; default all).
+    name, gear_ratio, frames_filled, recording : carried into the result.
+    """
+    from .motorfirst import identify_motor_first
+    from .twostep import identify_two_step
+
+    if method not in IDENTIFY_METHODS:
+        raise InputError(None, "method", f"one of {list(IDENTIFY_METHODS)}", repr(method))
+    two = identify_two_step(t, q, q_m, u, fs_hz=fs_hz, cutoff_hz=10.0 if cutoff_hz is None else cutoff_hz,
+                            decimate=decimate)
+    cond = {"cond_two_step": two.cond_two_step, "cond_one_step": two.cond_one_step}
+    models = tuple(spring_models or SPRING_FITTERS)
+    unknown = [m for m in models if m not in SPRING_FITTERS]
+    if unknown:
+        raise InputError(None, "spring_models", f"names from {sorted(SPRING_FITTERS)}", unknown)
+    if method == "two_step":
+        values = {n: Parameter(n, two.step1[n], two.step1.std_of(n)) for n in PARAMETER_NAMES if n != "k"}
+        values["k"] = Parameter("k", two.spring["k"], two.spring.std_of("k"))
+        spring = _selected(select_spring_model(two.delta, two.tau_s, two.t, models=models))
+        stages = {"step1": two.step1, "spring": two.spring, "one_step": two.one_step}
+        torque_rms, q_zero = two.torque_rms, two.q_zero_rad
+    else:
+        # a linear pass (which also tests the motor equation for a hysteretic spring); without
+        # hysteresis the spring model is selected on its pairs and, when it is not linear, the motor
+        # equation is solved again with that shape and the spring refitted on the new pairs
+        mf = identify_motor_first(t, q, q_m, u, fs_hz=fs_hz, decimate=decimate)
+        if mf.hysteresis is not None:
+            spring = _hysteretic_spring(mf.hysteresis, mf.delta, mf.tau_s, mf.t, fs_hz)
+        else:
+            sel = select_spring_model(*spring_pairs(mf.delta, mf.tau_s, mf.t, fs_hz),
+                                      models=tuple(m for m in models if m not in HYSTERETIC))
+            if sel.chosen.model != "linear":
+                mf = identify_motor_first(t, q, q_m, u, fs_hz=fs_hz, decimate=decimate, spring=sel.chosen.predict,
+                                          q_zero_rad=mf.q_zero_rad)
+                sel = select_spring_model(*spring_pairs(mf.delta, mf.tau_s, mf.t, fs_hz),
+                                          models=(sel.chosen.model, "linear"))
+            spring = _selected(sel)
+        values = {}
+        for n in PARAMETER_NAMES:
+            part = mf.link if n in mf.link.names else mf.motor
+            values[n] = Parameter(n, part[n], part.std_of(n))
+        stages = {"motor": mf.motor, "link": mf.link}
+        cond.update(cond_motor=mf.motor.cond, cond_link=mf.link.cond)
+        torque_rms, q_zero = mf.motor.residual_rms, mf.q_zero_rad
+    p = {n: v.value for n, v in values.items()}
+    return IdentifiedJoint(name=name, method=method, params=values, model=_model(name, gear_ratio, p, spring),
+                           spring=spring, stages=stages, cond=cond, torque_rms=float(torque_rms),
+                           q_zero_rad=float(q_zero), k_one_step=float(two.one_step["k"]),
+                           frames_filled=int(frames_filled), recording=recording)
+
+
+def identify_signals(signals: JointSignals, *, gear_ratio: float = 1.0, recording: str = "", **kw) -> IdentifiedJoint:
+    """:func:`identify_joint` on a :class:`~mocapfj.types.JointSignals` (the joints stage's output)."""
+    return identify_joint(signals.t, signals.q, signals.q_m, signals.u, fs_hz=signals.fs_hz, name=signals.name,
+                          gear_ratio=gear_ratio, frames_filled=signals.n_filled, recording=recording, **kw)
+
+
