@@ -4,13 +4,13 @@ Goals (issue: joint angles from markers):
 - chain: `mocapfj.joints.chain.solve_chain` on the PA-10-like arm with all six joints moving,
   17 markers on links 1, 2, 3, 4 and 6 (3-4 per link; link 5 has no marker surface), 0.2 mm
   noise, seeded with motor angles = truth + 0.3 deg noise: >= 20,000 frames/s on 2 cores.
-- single joint: `mocapfj.joints.angles.joint_angles` (closed form of seed 000 eq. 13), 4 markers:
+- single joint: `mocapfj.joints.angles.joint_angles` (closed form of Lightcap and Banks (2007), eq. 13), 4 markers:
   >= 1,000,000 frames/s and >= 1000x the per-frame scipy approach.
 
 Peers measured in the same run, on a subset of frames and scaled (their cost is linear in frames):
 - chain: per-frame `scipy.optimize.least_squares` with Pinocchio forward kinematics (the paper's
-  approach: seed 000 §III fits each frame by nonlinear least squares, seeded with the motor angle);
-- single joint: per-frame `scipy.optimize.least_squares` of seed 000 eq. (13) over one angle.
+  approach: Lightcap and Banks (2007), §III fits each frame by nonlinear least squares, seeded with the motor angle);
+- single joint: per-frame `scipy.optimize.least_squares` of Lightcap and Banks (2007), eq. (13) over one angle.
 Each mocapfj time is the best of 3 runs (the machine is shared); the peers run once.
 """
 
@@ -90,7 +90,7 @@ def chain_case(T: int = 50_000, n_peer: int = 200) -> dict:
 
 # ==================================================================================================
 # SINGLE JOINT: closed form (mocapfj.joints.angles.joint_angles) vs per-frame scipy least_squares of
-# seed 000 eq. (13). Goal: >= 1,000,000 frames/s and >= 1000x the peer. Prints "not available" when
+# Lightcap and Banks (2007), eq. (13). Goal: >= 1,000,000 frames/s and >= 1000x the peer. Prints "not available" when
 # mocapfj.joints.angles is missing.
 # ==================================================================================================
 def single_joint_case(T: int = 1_000_000, n_peer: int = 1000) -> dict | None:

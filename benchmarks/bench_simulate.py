@@ -1,4 +1,4 @@
-"""Synthetic recording speed: the 60 s pa10_joint2 scenario (seed 000 Table I, joint 2).
+"""Synthetic recording speed: the 60 s pa10_joint2 scenario (Lightcap and Banks (2007), Table I, joint 2).
 
 Goal (issue: simulator and synthetic recordings): simulate and render a 60 s single-joint
 scenario in under 20 s on 2 cores. Peers measured in the same run:

@@ -1,6 +1,6 @@
 """Write the concealed-effect suite: datasets/suite/<effect>_{ident,valid}.toml and control_*.
 
-Every scenario is pa10_joint2 (seed 000 Table I, joint 2) with one effect of the discovery
+Every scenario is pa10_joint2 (Lightcap and Banks (2007), Table I, joint 2) with one effect of the discovery
 vocabulary planted in the true system, sized so that its contribution to the measured deflection
 has an RMS below the per-sample noise SD of that deflection (0.43 mrad: 0.2 mm marker noise on
 the four link markers). The identification and the validation trial share the effect and differ
@@ -45,7 +45,7 @@ EFFECTS = {
     "drive_gain": ({"gain": 1.05}, "the drive delivers 5 % more torque than the controller logs"),
 }
 
-# identification and validation excitations (seed 000 eq. 9) and seeds
+# identification and validation excitations (Lightcap and Banks (2007), eq. 9) and seeds
 TRIALS = {
     "ident": {"seed": 100, "reference": {"f0_hz": 0.1, "q0_rad": 0.3, "amplitudes_rad": [0.30, 0.12, 0.08, 0.05, 0.03],
                                          "phases_rad": [0.0, 1.1, 2.3, 0.7, 1.9], "ramp_s": 2.0}},
@@ -53,7 +53,7 @@ TRIALS = {
                                          "phases_rad": [0.9, 2.4, 0.3, 1.5, 2.8], "ramp_s": 2.0}},
 }
 
-J3 = {  # the neighbour that moves in the coupling scenarios: seed 000 Table I joint 3
+J3 = {  # the neighbour that moves in the coupling scenarios: Lightcap and Banks (2007), Table I joint 3
     "name": "j3", "axis": 3, "gear_ratio": 50.0, "I": 2.27, "J": 2.48, "mglx": 8.33, "mgly": 8.56, "b": 6.35,
     "link_markers": ["L3_1", "L3_2", "L3_3"], "parent_markers": ["L2_1", "L2_2", "L2_3", "L2_4"],
     "friction": {"model": "coulomb_viscous", "c": 5.81, "v": 5.79}, "spring": {"model": "linear", "k": 4.60e3},

@@ -10,8 +10,6 @@ dimensions broadcast, no loops.
 from __future__ import annotations
 
 import numpy as np
-from scipy.spatial.transform import Rotation
-
 from .errors import InputError
 
 __all__ = ["skew", "matrix_from_axis_angle", "rotate", "matrix_from_rotvec", "rotvec_from_matrix", "twist_angle"]
@@ -62,12 +60,15 @@ def rotate(axis, q, v) -> np.ndarray:
 
 def matrix_from_rotvec(r) -> np.ndarray:
     """Rotation vector(s) (3,) or (N, 3) (axis x angle, rad; OpenCV's rvec) to matrices."""
-    r = np.asarray(r, dtype=np.float64)
-    return Rotation.from_rotvec(r).as_matrix()
+    from scipy.spatial.transform import Rotation     # scipy.spatial costs 0.2 s to import: on first use
+
+    return Rotation.from_rotvec(np.asarray(r, dtype=np.float64)).as_matrix()
 
 
 def rotvec_from_matrix(R) -> np.ndarray:
     """Rotation matrices (3, 3) or (N, 3, 3) to rotation vectors (axis x angle, rad)."""
+    from scipy.spatial.transform import Rotation
+
     return Rotation.from_matrix(np.asarray(R, dtype=np.float64)).as_rotvec()
 
 

@@ -540,7 +540,7 @@ class Deflection:
 
 @dataclass(frozen=True, eq=False)
 class LSResult:
-    """A least-squares identification with its statistics (seed 003 eq. 15-17).
+    """A least-squares identification with its statistics (Jubien, Abba and Gautier (2014), eq. 15-17).
 
     Attributes
     ----------

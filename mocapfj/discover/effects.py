@@ -293,7 +293,7 @@ def drive_gain(fam: Families, mask, others) -> Candidate | None:
 # ---------------------------------------------------------------- link residual
 
 def stribeck(fam: Families, mask, others) -> Candidate | None:
-    """Breakaway friction above Coulomb at low speed, (fs - fc) exp(-(q'/vs)^2) sign(q') (seed 001
+    """Breakaway friction above Coulomb at low speed, (fs - fc) exp(-(q'/vs)^2) sign(q') (Oueslati et al. (2012)
     eq. 7), vs by variable projection."""
     cv = _coulomb(fam)
     if cv is None:
@@ -326,7 +326,7 @@ def stribeck(fam: Families, mask, others) -> Candidate | None:
         return (f"At low speed (|q'| below about {3 * vs:.3g} rad/s, on both signs) the joint needs "
                 f"{peak:.2f} N m more than Coulomb plus viscous friction predict, falling off over a Stribeck "
                 f"velocity of {vs:.3g} rad/s: the breakaway friction of the lubricated gear and bearing "
-                f"contacts (static {fc + peak:.2f} N m vs sliding {fc:.2f} N m, seed 001 eq. 7).")
+                f"contacts (static {fc + peak:.2f} N m vs sliding {fc:.2f} N m, Oueslati et al. (2012), eq. 7).")
     return Candidate("stribeck", "link", params, 2, contribution,
                      lambda m: m.with_(friction=Stribeck(fc=fc, fs=fc + peak, vs=vs, fv=fv)), loc, explain)
 
@@ -352,7 +352,7 @@ def friction_asymmetry(fam: Families, mask, others) -> Candidate | None:
         return (f"The friction differs with the direction of motion: Coulomb {fc + dc:.2f} N m and viscous "
                 f"{fv + dv:.2f} N m s for q' > 0 against {fc - dc:.2f} N m and {fv - dv:.2f} N m s for q' < 0. "
                 f"Seal preload, the helix of the gearing and lubricant distribution make joint friction "
-                f"direction-dependent (seed 001 Table I, seed 002 Table II).")
+                f"direction-dependent (Oueslati et al. (2012), Table I, Bompos et al. (2007), Table II).")
     return Candidate("friction_asymmetry", "link", params, 2, contribution,
                      lambda m: m.with_(friction=el), loc, explain)
 
@@ -404,7 +404,7 @@ def position_dependent_friction(fam: Families, mask, others) -> Candidate | None
         return (f"The friction level changes with the joint angle, repeating {parts}: the Coulomb friction "
                 f"ripples with position, as the harmonic drive's manufacturing and assembly errors (eccentricity, "
                 f"misalignment of wave generator and flexspline) load its teeth and bearings unevenly over a turn "
-                f"(seed 000 sec. VI).")
+                f"(Lightcap and Banks (2007) sec. VI).")
     return Candidate("position_dependent_friction", "link", params, 2 * len(chosen) + len(chosen), contribution,
                      lambda m: m.with_(friction=PositionDependent(m.friction, orders=tuple(chosen),
                                                                   amplitudes=tuple(amps), phases=tuple(phases))),

@@ -3,7 +3,7 @@ elements, read from and written to a model file, and its output-error simulation
 
 The joint model itself is :class:`mocapfj.dynamics.JointModel` (identification produces it).
 A model file (TOML, ``format = "mocapfj.model/1"``) has one ``[[joints]]`` table per joint:
-``name``, ``gear_ratio``, ``I``, ``J``, ``mglx``, ``mgly``, ``b`` (seed 000 names and SI units,
+``name``, ``gear_ratio``, ``I``, ``J``, ``mglx``, ``mgly``, ``b`` (Lightcap and Banks (2007) names and SI units,
 docs/conventions.md), ``friction`` and ``spring`` tables (:mod:`mocapfj.dynamics.spec`), and the
 optional drivetrain and measurement terms discovery adds: ``transmission_error``
 {amplitudes_rad, phases_rad, orders}, ``position_torque`` {orders, cos_Nm, sin_Nm, chebyshev_Nm,

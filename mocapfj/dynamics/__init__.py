@@ -1,10 +1,10 @@
 """Flexible-joint dynamics: friction, springs and hysteresis, drivetrain effects, models, simulation.
 
-The model is seed 000 eq. (1) and, for one joint, eq. (4), in the signs of docs/conventions.md:
+The model is Lightcap and Banks (2007), eq. (1) and, for one joint, eq. (4), in the signs of docs/conventions.md:
 
     M(q) q'' + C(q, q') q' + G(q) + F(q, q') = tau_s        (links)
     J q_m'' + B q_m' + tau_s = u                              (motors, link side)
-    tau_s = f(delta, history),  delta = q_m - q               (springs, seed 000 eq. 7)
+    tau_s = f(delta, history),  delta = q_m - q               (springs, Lightcap and Banks (2007), eq. 7)
 
 - :mod:`.friction`: F(q, q') models sharing ``torque(qd, q=None)``, ``smoothing``, ``params``.
 - :mod:`.springs`, :mod:`.hysteresis`: f(delta, z) elements sharing one state protocol

@@ -1,4 +1,4 @@
-"""The flexible-joint equations shared by the single-joint and the n-link models (seed 000 eq. 1).
+"""The flexible-joint equations shared by the single-joint and the n-link models (Lightcap and Banks (2007), eq. 1).
 
     M(q) q'' + C(q, q') q' + G(q) + F(q, q') = tau_s + tau_bal(q) + tau_ext        (link)
     J q_m'' + B q_m' + (1 + e'(q_m)) tau_s = g u                                   (motor)
@@ -7,7 +7,7 @@
 with per-joint friction F, spring elements f (stateful or not, :mod:`.springs`), joint damping
 D, and the drivetrain effects of :mod:`.drivetrain`: transmission error e, balancer torque
 tau_bal, drive gain g (the motor makes g u when u is commanded). Without those effects this is
-exactly seed 000 eq. (1), and for one joint eq. (4). Joint arrays have the joint axis last:
+exactly Lightcap and Banks (2007), eq. (1), and for one joint eq. (4). Joint arrays have the joint axis last:
 q (..., n); leading axes (e.g. time) broadcast. Spring states of all joints are stacked in one
 vector z (..., n_z), joint j owning ``z[..., spring_slices[j]]``.
 
@@ -142,7 +142,7 @@ class FlexibleJointModel:
         return np.linalg.solve(M, rhs[..., None])[..., 0]
 
     def link_torque(self, q, qd, qdd, tau_ext=None) -> np.ndarray:
-        """Spring torque tau_s (..., n) N m that makes the link move as given (seed 000 eq. 7)."""
+        """Spring torque tau_s (..., n) N m that makes the link move as given (Lightcap and Banks (2007), eq. 7)."""
         q, qd, qdd = self._joints(q, "q"), self._joints(qd, "qd"), self._joints(qdd, "qdd")
         Mqdd = (self._effective_mass(q) @ qdd[..., None])[..., 0]
         tau = Mqdd + self.nonlinear_effects(q, qd) + self.friction_torque(q, qd) - self.balancer_torque(q)
@@ -174,7 +174,7 @@ class FlexibleJointModel:
     def link_state_derivative(self, x, q_m, qd_m, tau_ext=None) -> np.ndarray:
         """dx/dt for x = [q, q', z] (2n + n_z,) with the motors moving as given, q_m, q_m' (n,).
 
-        The motor equation then only yields u (``motor_torque``); seed 000 eq. (10) is this
+        The motor equation then only yields u (``motor_torque``); Lightcap and Banks (2007), eq. (10) is this
         right-hand side for the single joint of eq. (4).
         """
         n, x = self.n_joints, np.asarray(x, dtype=np.float64)

@@ -1,4 +1,4 @@
-"""Joint friction models: the term F(q, q') of the link equation (seed 000 eq. 4, docs/conventions.md).
+"""Joint friction models: the term F(q, q') of the link equation (Lightcap and Banks (2007), eq. 4, docs/conventions.md).
 
 Every model is a frozen dataclass with the same interface:
 
@@ -11,7 +11,7 @@ Every model is a frozen dataclass with the same interface:
 - ``params``: the coefficients as a dict ``{name: float}``.
 
 Coulomb magnitudes are positive numbers on both sides of zero velocity, as the seed tables list
-them (seed 001 Table I, seed 002 Table II): for q' < 0 the Coulomb part is ``-c_neg``.
+them (Oueslati et al. (2012), Table I, Bompos et al. (2007), Table II): for q' < 0 the Coulomb part is ``-c_neg``.
 """
 
 from __future__ import annotations
@@ -79,12 +79,12 @@ class _Scalars:
 
 @dataclass(frozen=True)
 class CoulombViscous(_Scalars):
-    """Coulomb plus viscous friction, seed 000 eq. (4): ``F = c sign(q') + v q'``.
+    """Coulomb plus viscous friction, Lightcap and Banks (2007), eq. (4): ``F = c sign(q') + v q'``.
 
     Parameters
     ----------
     c : float
-        Coulomb level, N m (seed 000 Table I column c).
+        Coulomb level, N m (Lightcap and Banks (2007), Table I column c).
     v : float
         Viscous coefficient, N m s / rad.
     smoothing : float
@@ -107,7 +107,7 @@ class AsymmetricCoulombViscous(_Scalars):
 
     ``F = c_pos sign(q') + v_pos q'`` for q' >= 0 and ``F = c_neg sign(q') + v_neg q'`` for
     q' < 0 (both Coulomb magnitudes positive). Equal sides give :class:`CoulombViscous`.
-    The asymmetry is the one seen in seed 001 Table I and seed 002 Table II.
+    The asymmetry is the one seen in Oueslati et al. (2012), Table I and Bompos et al. (2007), Table II.
     """
 
     c_pos: float
@@ -130,7 +130,7 @@ def _stribeck(qd, s, fc, fs, vs, fv, exponent):
 
 @dataclass(frozen=True)
 class Stribeck(_Scalars):
-    """Stribeck friction, seed 001 eq. (7):
+    """Stribeck friction, Oueslati et al. (2012), eq. (7):
 
         F = (fc + (fs - fc) exp(-|q'/vs|^exponent)) sign(q') + fv q'
 
@@ -143,7 +143,7 @@ class Stribeck(_Scalars):
     fv : float
         Viscous coefficient, N m s / rad.
     exponent : float
-        2 in seed 001; 1 is also common.
+        2 in Oueslati et al. (2012); 1 is also common.
     smoothing : float
         eps in rad/s for ``tanh(q'/eps)``; 0 for the exact sign.
     """
@@ -169,9 +169,9 @@ class Stribeck(_Scalars):
 
 @dataclass(frozen=True)
 class AsymmetricStribeck(_Scalars):
-    """Stribeck friction (seed 001 eq. 7) with its own coefficients on each side of q' = 0.
+    """Stribeck friction (Oueslati et al. (2012), eq. 7) with its own coefficients on each side of q' = 0.
 
-    Seed 001 Table I lists exactly this for the Staubli RX-170B axis 2 (positive velocity:
+    Oueslati et al. (2012), Table I lists exactly this for the Staubli RX-170B axis 2 (positive velocity:
     fc 122.19, fs 148.54 N m, fv 336.73 N m s/rad, vs 0.009 rad/s; negative velocity: fc 87.02,
     fs 111.38, fv 294.44, vs 0.009). Magnitudes are positive on both sides.
     """
@@ -222,7 +222,7 @@ def _extended(qd, s, f):
 
 @dataclass(frozen=True)
 class ExtendedStribeck:
-    """The six-coefficient friction model of seed 002 eq. (18) (Mitsubishi PA-10):
+    """The six-coefficient friction model of Bompos et al. (2007), eq. (18) (Mitsubishi PA-10):
 
         F = f1 q' + f2 sign(q') - f3 sign(q') exp(-|q'| / f4) - f5 sign(q') exp(-1 / (f6 |q'|))
 
@@ -231,7 +231,7 @@ class ExtendedStribeck:
     f : 6 floats
         (f1 N m s/rad, f2 N m, f3 N m, f4 rad/s > 0, f5 N m, f6 s/rad >= 0) for q' >= 0.
     f_neg : 6 floats or None
-        The same for q' < 0 (seed 002 Table II gives both sides); None: symmetric.
+        The same for q' < 0 (Bompos et al. (2007), Table II gives both sides); None: symmetric.
     smoothing : float
         eps in rad/s for ``tanh(q'/eps)``; 0 for the exact sign.
 
@@ -274,7 +274,7 @@ class PositionDependent:
 
         F(q, q') = base.torque(q', q) + sign(q') sum_k a_k cos(n_k q + phi_k)
 
-    Harmonic-drive friction ripple from manufacturing errors and misalignment (seed 000 sec. VI;
+    Harmonic-drive friction ripple from manufacturing errors and misalignment (Lightcap and Banks (2007) sec. VI;
     docs methods "position-dependent friction": residual periodic in joint angle). Keep
     ``sum |a_k|`` below the base Coulomb level for a model that never drives the joint.
 

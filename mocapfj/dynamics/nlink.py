@@ -1,4 +1,4 @@
-"""n rigid links on flexible joints, rigid-body terms from a URDF through Pinocchio (seed 000 eq. 1).
+"""n rigid links on flexible joints, rigid-body terms from a URDF through Pinocchio (Lightcap and Banks (2007), eq. 1).
 
     M(q) q'' + C(q, q') q' + G(q) + F(q, q') = tau_s + tau_bal(q)      (links, Pinocchio)
     J q_m'' + B q_m' + (1 + e'(q_m)) tau_s = g u                         (motors, diagonal J, B)

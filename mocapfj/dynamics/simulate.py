@@ -6,7 +6,7 @@ step limited by `max_step`), the spring/hysteresis states riding in the state ve
 The drive says what moves the motor:
 
 - :class:`PrescribedMotor`: q_m(t) is given; only the links and the spring states are
-  integrated and u follows from the motor equation (seed 000 eq. 4, second line).
+  integrated and u follows from the motor equation (Lightcap and Banks (2007), eq. 4, second line).
 - :class:`PID`: a motor-position loop tracking q_ref(t) (PD when ki = 0).
 - :class:`TorqueInput`: u(t) is given (open loop; u = 0 leaves the joint free).
 

@@ -1,10 +1,10 @@
-"""One rigid link on one flexible joint: seed 000 eq. (4), with any friction, spring and drivetrain.
+"""One rigid link on one flexible joint: Lightcap and Banks (2007), eq. (4), with any friction, spring and drivetrain.
 
     I q'' - mglx sin(q) + mgly cos(q) + F(q, q') = tau_s + tau_bal(q)      (link)
     J q_m'' + b q_m' + (1 + e'(q_m)) tau_s = g u                            (motor)
     tau_s = f(delta, z) + d delta',    delta = q_m + e(q_m) - q               (spring)
 
-Seed 000 eq. (4) is the case F = c sign(q') + v q', f = k delta, d = 0, e = 0, tau_bal = 0,
+Lightcap and Banks (2007), eq. (4) is the case F = c sign(q') + v q', f = k delta, d = 0, e = 0, tau_bal = 0,
 g = 1. The equations themselves live in :class:`.flexjoint.FlexibleJointModel`; joint arrays
 keep a joint axis of length 1 last, e.g. q (T, 1), like ``ControllerLog.q_m``.
 """
@@ -29,7 +29,7 @@ __all__ = ["SingleJoint"]
 
 @dataclass(frozen=True, eq=False)
 class SingleJoint(FlexibleJointModel):
-    """Parameters of the single-joint flexible model (seed 000 eq. 4, Table I for magnitudes).
+    """Parameters of the single-joint flexible model (Lightcap and Banks (2007), eq. 4, Table I for magnitudes).
 
     Attributes
     ----------
@@ -46,7 +46,7 @@ class SingleJoint(FlexibleJointModel):
     friction : Friction
         Link friction F(q, q'); default none.
     d : float
-        Joint damping in parallel with the spring, N m s / rad (not in seed 000; default 0).
+        Joint damping in parallel with the spring, N m s / rad (not in Lightcap and Banks (2007); default 0).
     drivetrain : Drivetrain
         Transmission error, balancer, drive gain; default ideal.
     name : str

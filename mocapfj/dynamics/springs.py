@@ -1,4 +1,4 @@
-"""Joint springs: the transmitted torque tau_s = f(delta, history) (seed 000 eq. 7, docs/conventions.md).
+"""Joint springs: the transmitted torque tau_s = f(delta, history) (Lightcap and Banks (2007), eq. 7, docs/conventions.md).
 
 All spring elements, with or without internal state, share one protocol (:class:`SpringElement`)
 so that the models and the simulator treat them alike:
@@ -90,12 +90,12 @@ class _Stateless:
 
 @dataclass(frozen=True)
 class LinearSpring(_Stateless):
-    """Linear spring with a deflection offset, seed 000 eq. (7): ``tau_s = k (delta - offset)``.
+    """Linear spring with a deflection offset, Lightcap and Banks (2007), eq. (7): ``tau_s = k (delta - offset)``.
 
     Parameters
     ----------
     k : float
-        Stiffness, N m / rad (seed 000 Table I: 4.78e2 to 1.19e4).
+        Stiffness, N m / rad (Lightcap and Banks (2007), Table I: 4.78e2 to 1.19e4).
     offset : float
         Deflection at zero torque, rad (e.g. a zero mismatch between resolver and mocap).
     """

@@ -1,4 +1,4 @@
-"""Signal conditioning for identification (seed 003 §3; Gautier 1997): zero-phase low-pass
+"""Signal conditioning for identification (Jubien, Abba and Gautier (2014), §3; Gautier 1997): zero-phase low-pass
 filtering, derivatives by central differences, parallel decimation of the observation matrix and
 the torque together, resampling onto another clock. Every default is overridable.
 """
@@ -55,7 +55,7 @@ def derivatives(x: np.ndarray, fs_hz: float) -> tuple[np.ndarray, np.ndarray]:
 
 def decimate_parallel(W: np.ndarray, y: np.ndarray, factor: int, fs_hz: float | None = None,
                       cutoff_hz: float | None = None, order: int = 8) -> tuple[np.ndarray, np.ndarray]:
-    """Parallel decimation (seed 003 §3): the same low-pass on y and on every column of W, then
+    """Parallel decimation (Jubien, Abba and Gautier (2014), §3): the same low-pass on y and on every column of W, then
     one sample in `factor`. The default cut-off is 0.8 x the new Nyquist rate (as
     scipy.signal.decimate's Chebyshev filter); pass fs_hz and cutoff_hz to choose it.
     """

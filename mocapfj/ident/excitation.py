@@ -1,20 +1,20 @@
-"""Excitation design for the identification of one flexible joint (seed 000 §II.B, eq. 8-10).
+"""Excitation design for the identification of one flexible joint (Lightcap and Banks (2007), §II.B, eq. 8-10).
 
-The motor reference is the finite Fourier series of seed 000 eq. (9) in exactly the
+The motor reference is the finite Fourier series of Lightcap and Banks (2007), eq. (9) in exactly the
 parameterisation the simulator plays (:func:`mocapfj.synth.scenario.reference_trajectory`),
 
     q_m(t) = q0 + s(t) sum_{l=1..N} a_l [sin(2 pi l f0 t + phi_l) - sin(phi_l)],
 
 with the smoothstep ramp s(t) = x^2 (3 - 2 x), x = clip(t / ramp_s, 0, 1). The amplitudes a_l
 (rad) and phases phi_l (rad) minimise the condition number of the step-1 regressor
-(:func:`mocapfj.ident.twostep.step1_regressor`, seed 000 eq. 6, columns for I, mglx, mgly, c,
-v, J, b) subject to motor position, velocity and acceleration limits (seed 000 eq. 8).
+(:func:`mocapfj.ident.twostep.step1_regressor`, Lightcap and Banks (2007), eq. 6, columns for I, mglx, mgly, c,
+v, J, b) subject to motor position, velocity and acceleration limits (Lightcap and Banks (2007), eq. 8).
 
-Link motion (seed 000 eq. 10). For the optimisation the link follows the motor through a
+Link motion (Lightcap and Banks (2007), eq. 10). For the optimisation the link follows the motor through a
 quasi-static spring: delta = tau_s / k with tau_s = I q'' - mglx sin q + mgly cos q + v q'
 + c tanh(q' / eps) (docs/conventions.md signs), two fixed-point passes, derivatives of delta by
 periodic central differences. This holds while the harmonics stay well below the joint's
-natural frequency sqrt(k / I) (about 7 Hz for seed 000 Table I joint 2); the final design can be
+natural frequency sqrt(k / I) (about 7 Hz for Lightcap and Banks (2007), Table I joint 2); the final design can be
 checked by one full simulation, :func:`simulated_condition`.
 
 The condition number is evaluated over one period 1 / f0 of the steady motion (after the ramp):
@@ -46,7 +46,7 @@ class ExcitationDesign:
 
     reference : dict
         f0_hz, q0_rad, amplitudes_rad (N,), phases_rad (N,), ramp_s — the `[joints.reference]`
-        table of a scenario file (seed 000 eq. 9).
+        table of a scenario file (Lightcap and Banks (2007), eq. 9).
     cond : float
         Condition number of the step-1 regressor (quasi-static link model) over one period.
     q_range_rad : (float, float)
@@ -75,7 +75,7 @@ def _fourier(t, f0, a, ph):
 
 
 def reference_motion(ref: dict, t) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Motor reference q_m, q_m', q_m'' (rad, rad/s, rad/s^2) at times t (T,) s; seed 000 eq. (9).
+    """Motor reference q_m, q_m', q_m'' (rad, rad/s, rad/s^2) at times t (T,) s; Lightcap and Banks (2007), eq. (9).
 
     The same function as :func:`mocapfj.synth.scenario.reference_trajectory` (ramp included),
     with the acceleration added (s'' of the smoothstep is 6 (1 - 2x) / ramp_s^2 on the ramp).
@@ -101,7 +101,7 @@ def _check_params(p: dict) -> dict:
     for key, default in (("I", None), ("k", None), ("mglx", None), ("mgly", None), ("c", 0.0), ("v", 0.0)):
         v = p.get(key, default)
         if v is None:
-            raise InputError(None, f"model_params.{key}", "a number (seed 000 Table I names)", "missing")
+            raise InputError(None, f"model_params.{key}", "a number (Lightcap and Banks (2007), Table I names)", "missing")
         v = float(v)
         if not np.isfinite(v) or (key in ("I", "k") and not v > 0) or (key in ("c", "v") and v < 0):
             raise InputError(None, f"model_params.{key}", "positive" if key in ("I", "k") else "a finite number", v)
@@ -174,7 +174,7 @@ class _Problem:
 
 
 def reference_condition(ref: dict, model_params: dict) -> float:
-    """Condition number of the step-1 regressor (seed 000 eq. 6) for any reference `ref`.
+    """Condition number of the step-1 regressor (Lightcap and Banks (2007), eq. 6) for any reference `ref`.
 
     Same quasi-static link model and one-period window as :func:`design_excitation`, so a
     hand-made reference and an optimised design are compared on equal terms.
@@ -209,19 +209,19 @@ def _optimise(pb, n, rng, n_starts, margin, maxfev):
 def design_excitation(model_params: dict, limits: dict, *, f0_hz: float, n_harmonics: int = 5,
                       duration_s: float = 60.0, ramp_s: float = 2.0, q0_rad: float | None = None,
                       seed: int = 0, n_starts: int = 4, margin: float = 0.99, maxfev: int = 1500) -> ExcitationDesign:
-    """Optimal motor reference of seed 000 eq. (8)-(9) for one joint.
+    """Optimal motor reference of Lightcap and Banks (2007), eq. (8)-(9) for one joint.
 
     Parameters
     ----------
     model_params : dict
-        Approximate parameters (seed 000 Table I names, docs/conventions.md signs): I (kg m^2),
+        Approximate parameters (Lightcap and Banks (2007), Table I names, docs/conventions.md signs): I (kg m^2),
         k (N m/rad), mglx, mgly (N m), optional c (N m), v (N m s/rad). J and b are not needed
         (the motor motion is prescribed) and are ignored.
     limits : dict
         q_min_rad < q_m(t) < q_max_rad, |q_m'| < qd_max_rad_s, |q_m''| < qdd_max_rad_s2 (motor,
         link side).
     f0_hz : float
-        Fundamental frequency; seed 000 §II.B: near the natural frequency when the sampling allows.
+        Fundamental frequency; Lightcap and Banks (2007), §II.B: near the natural frequency when the sampling allows.
     n_harmonics : int
         N, the number of terms (fundamental and N - 1 harmonics).
     duration_s : float
@@ -263,10 +263,10 @@ def design_excitation(model_params: dict, limits: dict, *, f0_hz: float, n_harmo
 
 
 def simulated_condition(ref: dict, model, *, duration_s: float, fs_hz: float = 200.0):
-    """Check of a reference by forward simulation of seed 000 eq. (10) (motor prescribed).
+    """Check of a reference by forward simulation of Lightcap and Banks (2007), eq. (10) (motor prescribed).
 
     model : mocapfj.dynamics.SingleJoint (friction smoothed for the stiff integrator).
-    Returns (cond, SimulationResult): the step-1 regressor (seed 000 eq. 6) condition number
+    Returns (cond, SimulationResult): the step-1 regressor (Lightcap and Banks (2007), eq. 6) condition number
     over the steady part t >= ramp_s of a `duration_s` run sampled at `fs_hz`.
     """
     from ..dynamics.simulate import PrescribedMotor, simulate

@@ -1,23 +1,23 @@
 """Friction from constant-velocity sweeps: plateaus, Stribeck fits per side, pre-sliding.
 
-The experiment (seed 001 sec. III-B, seed 002 sec. 3): the joint is driven in velocity mode
-through a staircase of constant velocities on both signs (seed 002: 0.001 rad/s to 60 % of the
-maximum; seed 001: +-0.004 ... +-0.2 rad/s). On a plateau q'' = 0, so the link equation
+The experiment (Oueslati et al. (2012) sec. III-B, Bompos et al. (2007) sec. 3): the joint is driven in velocity mode
+through a staircase of constant velocities on both signs (Bompos et al. (2007): 0.001 rad/s to 60 % of the
+maximum; Oueslati et al. (2012): +-0.004 ... +-0.2 rad/s). On a plateau q'' = 0, so the link equation
 ``I q'' + G(q) + F(q, q') = tau`` (docs/conventions.md) leaves ``F(q') = tau - G(q)``: each
 plateau gives one point (mean velocity, mean friction torque) of the friction characteristic.
 
 - :func:`sweep_points`: find the plateaus of a recording and average them (SI, link side:
   rad, rad/s, N m).
-- :func:`fit_stribeck`: seed 001 eq. (7), one set of coefficients per side of q' = 0
+- :func:`fit_stribeck`: Oueslati et al. (2012), eq. (7), one set of coefficients per side of q' = 0
   (:class:`~mocapfj.dynamics.AsymmetricStribeck`) or one for both (:class:`~mocapfj.dynamics.Stribeck`).
-- :func:`fit_extended_stribeck`: seed 002 eq. (18) per side (:class:`~mocapfj.dynamics.ExtendedStribeck`).
+- :func:`fit_extended_stribeck`: Bompos et al. (2007), eq. (18) per side (:class:`~mocapfj.dynamics.ExtendedStribeck`).
 - :func:`fit_presliding`: torque against displacement at the start of a very slow motion (seed
   001 sec. III-B-2, 5.931e-5 rad/s), the Dahl curve ``tau = Fs (1 - exp(-sigma0 x / Fs))``.
 
 Nonlinear fits use ``scipy.optimize.least_squares`` from deterministic starts: the models are
 linear in their levels for fixed velocity scales, so the scales are first chosen on a grid by
 linear least squares (variable projection) and then all parameters are refined together. The
-reported standard deviations are seed 003 eq. (16) with the Jacobian at the solution:
+reported standard deviations are Jubien, Abba and Gautier (2014), eq. (16) with the Jacobian at the solution:
 ``C = sigma^2 (J^T J)^-1``, ``sigma^2 = rss / (r - p)``.
 """
 
@@ -191,7 +191,7 @@ class FrictionFit:
     params : dict of str to float
         Fitted coefficients, named as in ``model.params`` (fixed ones, e.g. the exponent, left out).
     std : dict of str to float
-        Their standard deviations, seed 003 eq. (16): sqrt(diag(sigma^2 (J^T J)^-1)) per side.
+        Their standard deviations, Jubien, Abba and Gautier (2014), eq. (16): sqrt(diag(sigma^2 (J^T J)^-1)) per side.
     rms : float
         RMS of tau - model(v) over all points, N m (unweighted).
     r2 : float
@@ -248,7 +248,7 @@ def _sides(v, asymmetric, p, what):
 
 
 def _refine(resid, jac, x0, lb, ub, names, field, expected, hint):
-    """least_squares from x0, then (x, std) with std from sigma^2 (J^T J)^-1 (seed 003 eq. 16).
+    """least_squares from x0, then (x, std) with std from sigma^2 (J^T J)^-1 (Jubien, Abba and Gautier (2014), eq. 16).
 
     Raises InputError(field, expected) when J at the solution has a zero column or columns that
     are dependent (condition number of the column-normalised J above 1e10).
@@ -319,7 +319,7 @@ def _finish(model, params, std, v, y):
 
 
 def fit_stribeck(v, tau=None, *, asymmetric: bool = True, weights=None, exponent: float = 2.0) -> FrictionFit:
-    """Fit the Stribeck model of seed 001 eq. (7) to plateau points, each side on its own.
+    """Fit the Stribeck model of Oueslati et al. (2012), eq. (7) to plateau points, each side on its own.
 
         F = (fc + (fs - fc) exp(-|q'/vs|^exponent)) sign(q') + fv q'
 
@@ -331,12 +331,12 @@ def fit_stribeck(v, tau=None, *, asymmetric: bool = True, weights=None, exponent
         Friction torques, N m.
     asymmetric : bool
         True: coefficients fc_pos, fs_pos, vs_pos, fv_pos from v > 0 and fc_neg ... from v < 0
-        (magnitudes positive on both sides, seed 001 Table I) -> AsymmetricStribeck. False: one
+        (magnitudes positive on both sides, Oueslati et al. (2012), Table I) -> AsymmetricStribeck. False: one
         set from all points -> Stribeck.
     weights : (P,) float, optional
         1 / se^2 per point (e.g. ``1 / points.se**2``); None: equal weights.
     exponent : float
-        Fixed Stribeck exponent (2 in seed 001).
+        Fixed Stribeck exponent (2 in Oueslati et al. (2012)).
 
     Returns
     -------
@@ -397,7 +397,7 @@ def _extended_side(a, y, sw):
 
 
 def fit_extended_stribeck(v, tau=None, *, asymmetric: bool = True, weights=None) -> FrictionFit:
-    """Fit the six-coefficient model of seed 002 eq. (18) to plateau points, per side of q' = 0.
+    """Fit the six-coefficient model of Bompos et al. (2007), eq. (18) to plateau points, per side of q' = 0.
 
         F = f1 q' + f2 sign(q') - f3 sign(q') exp(-|q'| / f4) - f5 sign(q') exp(-1 / (f6 |q'|))
 
@@ -408,7 +408,7 @@ def fit_extended_stribeck(v, tau=None, *, asymmetric: bool = True, weights=None)
     tau : (P,) float
         Friction torques, N m.
     asymmetric : bool
-        True: f1..f6 from v > 0 and f1_neg..f6_neg from v < 0 (seed 002 Table II); False: one set.
+        True: f1..f6 from v > 0 and f1_neg..f6_neg from v < 0 (Bompos et al. (2007), Table II); False: one set.
     weights : (P,) float, optional
         1 / se^2 per point; None: equal weights.
 
@@ -421,7 +421,7 @@ def fit_extended_stribeck(v, tau=None, *, asymmetric: bool = True, weights=None)
     ------
     InputError
         As :func:`fit_stribeck`, with more than 6 points needed per fitted side. The two
-        exponential terms need plateaus spanning both f4 and 1/f6: seed 002 swept from 0.001 rad/s
+        exponential terms need plateaus spanning both f4 and 1/f6: Bompos et al. (2007) swept from 0.001 rad/s
         to 60 % of the maximum velocity.
     """
     vv, yy, w = _points(v, tau, weights)
@@ -451,7 +451,7 @@ class PreslidingFit:
     sigma0 : float
         Pre-sliding (rest) stiffness, N m / rad: the initial slope of torque against displacement.
     std : dict of str to float
-        Standard deviations of "fs" and "sigma0" (seed 003 eq. 16).
+        Standard deviations of "fs" and "sigma0" (Jubien, Abba and Gautier (2014), eq. 16).
     direction : int
         +1 or -1, the sign of the motion; the curve is ``direction * fs (1 - exp(-sigma0 |x| / fs))``.
     rms, r2 : float
@@ -478,7 +478,7 @@ def fit_presliding(x, tau) -> PreslidingFit:
     """Fit ``tau = Fs (1 - exp(-sigma0 x / Fs))`` to a start-of-motion experiment.
 
     This is the Dahl element (exponent 1, :class:`mocapfj.dynamics.Dahl`) solved for monotone
-    motion from rest: ``dF/dx = sigma0 (1 - F / Fs)`` with F(0) = 0. The experiment of seed 001
+    motion from rest: ``dF/dx = sigma0 (1 - F / Fs)`` with F(0) = 0. The experiment of Oueslati et al. (2012)
     sec. III-B-2 drives the joint at a very low constant velocity (5.931e-5 rad/s) so the torque
     is friction only; there Fs came out about 150 N m (148.54 N m from the Stribeck fit).
 

@@ -11,11 +11,11 @@ The benchmark's conditioning, every step overridable:
 2. q', q'' by central differences (`conditioning.derivatives`, = the benchmark's diffcent.m);
 3. `border` samples are dropped at both ends (filter end effects);
 4. parallel decimation of W and the force by `decimate`: the same zero-phase low-pass on every
-   column of W and on y, then one sample in `decimate` (seed 003 §3). The default filter is the
+   column of W and on y, then one sample in `decimate` (Jubien, Abba and Gautier (2014), §3). The default filter is the
    benchmark's own, MATLAB `decimate` = Chebyshev I of order 8, 0.05 dB ripple, cut-off 0.8 x the
    new Nyquist rate, forward-backward (scipy.signal.decimate with zero_phase=True);
    ``decimation_filter="butterworth"`` uses `conditioning.decimate_parallel` instead;
-5. ordinary LS with seed 003 eq. 15-17 statistics (`ls.ls_fit`).
+5. ordinary LS with Jubien, Abba and Gautier (2014), eq. 15-17 statistics (`ls.ls_fit`).
 
 Units are SI: q in m (prismatic) or rad, force in N (or N m), t in s. Signs: docs/conventions.md.
 """
@@ -129,7 +129,7 @@ def idim_observation(t: np.ndarray | None, q: np.ndarray, force: np.ndarray, mod
 
 def idim_ls(t: np.ndarray | None, q: np.ndarray, force: np.ndarray, model: str = "coulomb_viscous_offset",
             **conditioning) -> LSResult:
-    """IDIM-LS estimate of the drive's parameters with seed 003 eq. 15-17 statistics.
+    """IDIM-LS estimate of the drive's parameters with Jubien, Abba and Gautier (2014), eq. 15-17 statistics.
 
     Same arguments as `idim_observation` (keyword-only conditioning options: fs_hz, cutoff_hz,
     filter_order, decimate, border, decimation_filter). On EMPS (DATA_EMPS.mat, force = gtau vir)

@@ -1,6 +1,6 @@
-"""Motor-first identification of one joint: a variant of seed 000 §II.A for mocap link angles.
+"""Motor-first identification of one joint: a variant of Lightcap and Banks (2007), §II.A for mocap link angles.
 
-Seed 000's step 1 solves the stiffness-free sum of the link and motor equations, in which the
+Lightcap and Banks' step 1 solves the stiffness-free sum of the link and motor equations, in which the
 link inertia I and the motor inertia J are told apart only by the deflection's acceleration
 delta''. With mocap link angles (0.43 mrad noise at 250 Hz on pa10_joint2) delta'' is buried in
 noise and I, J, v, b come out tens of percent off (tests/ident/test_twostep.py records it).
@@ -24,7 +24,7 @@ is), above it tau_s / k (the joint's vibration, which the mocap noise hides),
 The link equation (eq. 4, first row), I q'' - mglx sin q + mgly cos q + c sign(q') + v q' = tau_s,
 is solved on q_hat at `link_cutoff_hz` (20 Hz keeps the Coulomb steps sharp: a lower cut-off
 distorts the nonlinear columns and biases I). (tau_s, delta_mocap) then feed the spring models of
-`springs` as in seed 000's step 2.
+`springs` as in Lightcap and Banks' step 2.
 
 Precision. What limits it is the mocap angle's noise below 1 Hz (and, with a moving parent
 cluster, its shared and systematic error): on pa10_joint2 (60 s, 0.2 mm markers) J and b scatter
@@ -190,7 +190,7 @@ def identify_motor_first(t, q, q_m, u, *, fs_hz: float, cutoff_hz: float = 5.0, 
     split_hz : float
         Cross-over of the rebuilt link angle between mocap deflection and tau_s / k, Hz.
     decimate : int
-        Parallel decimation of the motor equation (seed 003 §3).
+        Parallel decimation of the motor equation (Jubien, Abba and Gautier (2014), §3).
     sign_eps : float
         Samples with |q'| below this (rad/s) are left out of the link equation.
     trim_s : float

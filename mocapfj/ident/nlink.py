@@ -1,5 +1,5 @@
 """n-link flexible-joint identification through mocap: the motor equations first, then the links'
-base parameters through Pinocchio (seed 000 eq. 1; :mod:`.motorfirst` for one joint).
+base parameters through Pinocchio (Lightcap and Banks (2007), eq. 1; :mod:`.motorfirst` for one joint).
 
 With flexible joints (docs/conventions.md),
 
@@ -11,7 +11,7 @@ angle rebuilt without differentiating mocap noise. The link equations are then l
 parameters of the links (Pinocchio's joint torque regressor with Coulomb and viscous columns,
 :func:`.regressor.nlink_regressor`; base parameters by pivoted QR, :func:`.regressor.base_parameters`),
 solved by least squares on every joint's rows together. Every column of the observation matrix and
-the torque get the same zero-phase low-pass (parallel filtering, seed 003 §3); rows where the
+the torque get the same zero-phase low-pass (parallel filtering, Jubien, Abba and Gautier (2014), §3); rows where the
 joint's speed is below `sign_eps` are left out (Coulomb sign ambiguous). Single-joint trials with
 the other joints braked are the special case of one moving joint (``mocapfj.ident.motorfirst``).
 """

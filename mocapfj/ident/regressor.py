@@ -1,5 +1,5 @@
 """Identification model of n rigid links through Pinocchio: the observation matrix of the link
-equation and its base parameters (seed 000 eq. 1 and 5-6; Khalil & Dombre ch. 12; Gautier 1990
+equation and its base parameters (Lightcap and Banks (2007), eq. 1 and 5-6; Khalil & Dombre ch. 12; Gautier 1990
 for base parameters by QR).
 
 Link side, docs/conventions.md:
@@ -11,7 +11,7 @@ phi, per moving joint j in model order (names ``<param>_<joint name>``):
     10 inertial parameters of the body joint j carries, about the JOINT frame origin, Pinocchio's
     order [m, mx, my, mz, Ixx, Ixy, Iyy, Ixz, Iyz, Izz] (kg, kg m, kg m^2; api-notes §2); a URDF's
     fixed children are merged into that body by Pinocchio;
-then per joint the friction columns (seed 000 eq. 4 / seed 002 eq. 18 without Stribeck):
+then per joint the friction columns (Lightcap and Banks (2007), eq. 4 / Bompos et al. (2007), eq. 18 without Stribeck):
     fc_j sign(q'_j), fv_j q'_j, and with ``friction="coulomb_viscous_offset"`` off_j;
 then, with ``armature=True``, Ia_j q''_j (rotor inertia reflected to the link; Pinocchio's
 ``computeJointTorqueRegressor`` leaves ``model.armature`` out although rnea includes it).

@@ -21,7 +21,8 @@ times the trajectory's bandwidth and differentiated by central differences; ever
 the torque go through the same low-pass and are decimated together (parallel decimation); samples
 near zero velocity are left out of the rows of that joint (the Coulomb sign is ambiguous there);
 base parameters by QR with column pivoting (:func:`.regressor.base_parameters`); ordinary least
-squares with its statistics (:func:`.ls.ls_fit`).
+squares with a Newey-West covariance (:func:`.ls.ls_fit`; the filtered residual is correlated).
+A friction law with a step is evaluated at the logged instants and resampled like the torque.
 """
 
 from __future__ import annotations
@@ -104,11 +105,23 @@ def _decimated(X3: np.ndarray, fs_hz, fc, decimate) -> np.ndarray:
     return Xd.reshape(-1, n, p)
 
 
-def _observation(W_in_d, qd, model: str, h, fs_hz, fc, decimate, joints):
+def _observation(W_in_d, qd, model: str, h, fs_hz, fc, decimate, joints, stamps=None):
     """(W (Td, n, p), names) for one friction law: the decimated inertial columns W_in_d (computed
-    once; the parallel filter is linear) and this law's friction columns, decimated alike."""
+    once; the parallel filter is linear) and this law's friction columns, decimated alike.
+
+    `stamps` = (t_grid (T,), t_log (T0,)) when the log was resampled onto the grid: a friction law
+    with a step (sign q') is then evaluated at the logged instants and resampled onto the grid by
+    the same linear interpolation as the torque, so that the step is smeared alike on both sides
+    (evaluated on the grid directly, each reversal would leave a one-sample misfit of 2 fc)."""
     T, n = qd.shape
-    cols, terms = _friction_columns(qd, model, h)
+    if stamps is None:
+        cols, terms = _friction_columns(qd, model, h)
+    else:
+        tg, tl = stamps
+        qd_log = np.column_stack([np.interp(tl, tg, qd[:, j]) for j in range(n)])
+        cl, terms = _friction_columns(qd_log, model, h)
+        cols = np.stack([np.column_stack([np.interp(tg, tl, cl[:, j, k]) for j in range(n)])
+                         for k in range(cl.shape[2])], axis=-1)
     eye = np.eye(n)
     F = (eye[None, :, :, None] * cols[:, :, None, :]).reshape(T, n, -1)        # joint-major, term-minor
     return np.concatenate([W_in_d, _decimated(F, fs_hz, fc, decimate)], axis=2), \
@@ -159,7 +172,8 @@ def identify_rigid_log(model, t, Q, TAU, *, joint_names: Sequence[str] | None = 
     for label, a in (("joint angle", Q), ("joint torque", TAU)):
         if not np.isfinite(a).all():
             raise InputError(source, label, "finite samples", f"{int((~np.isfinite(a)).sum())} NaN or infinite")
-    t, X, fs, n_res = uniform_log(t, np.concatenate([Q, TAU], axis=1), source=source)
+    t_log = np.asarray(t, dtype=np.float64)
+    t, X, fs, n_res = uniform_log(t_log, np.concatenate([Q, TAU], axis=1), source=source)
     Q, TAU = X[:, :n], X[:, n:]
     if t.size < 200:
         raise InputError(source, "time", "at least 200 samples for the filters and the fit", t.size)
@@ -173,13 +187,14 @@ def identify_rigid_log(model, t, Q, TAU, *, joint_names: Sequence[str] | None = 
     sl = slice(trim, t.size - trim)
     q, qd, qdd, TAU = q[sl], qd[sl], qdd[sl], TAU[sl]
     T = q.shape[0]
+    stamps = (t[sl], t_log) if n_res else None
 
     W_in, names_in = nlink_regressor(pm, q, qd, qdd, friction="none", armature=True)
     W_in_d = _decimated(W_in.reshape(T, n, -1), fs, cutoff_hz, decimate)
     y, keep = _torque(TAU, fs, cutoff_hz, decimate, sign_eps, qd)
 
     def fit(model_name, h, rows):
-        W3, fnames = _observation(W_in_d, qd, model_name, h, fs, cutoff_hz, decimate, names_j)
+        W3, fnames = _observation(W_in_d, qd, model_name, h, fs, cutoff_hz, decimate, names_j, stamps)
         names = tuple(names_in) + fnames
         W, Y, idx = _solve(W3, y, keep, rows)
         base_idx, Kd, base_names = base_parameters(W, names)
@@ -241,7 +256,8 @@ def torque_rms_on(model, fit: RigidIdentification, t, Q, TAU, source=None) -> di
     pm = load_pin_model(model)
     m, h, cutoff_hz, names_j, sign_eps = fit.friction, fit.friction_scale, fit.cutoff_hz, fit.joint_names, fit.sign_eps
     n = pm.nv
-    t, X, fs, _ = uniform_log(t, np.concatenate([Q, TAU], axis=1), source=source)
+    t_log = np.asarray(t, dtype=np.float64)
+    t, X, fs, n_res = uniform_log(t_log, np.concatenate([Q, TAU], axis=1), source=source)
     Q, TAU = X[:, :n], X[:, n:]
     q = lowpass(Q, fs, min(cutoff_hz, 0.45 * fs))
     qd, qdd = derivatives(q, fs)
@@ -250,7 +266,7 @@ def torque_rms_on(model, fit: RigidIdentification, t, Q, TAU, source=None) -> di
     sl = slice(trim, t.size - trim)
     W_in, names_in = nlink_regressor(pm, q[sl], qd[sl], qdd[sl], friction="none", armature=True)
     W_in_d = _decimated(W_in.reshape(q[sl].shape[0], n, -1), fs, cutoff_hz, decimate)
-    W3, fnames = _observation(W_in_d, qd[sl], m, h, fs, cutoff_hz, decimate, names_j)
+    W3, fnames = _observation(W_in_d, qd[sl], m, h, fs, cutoff_hz, decimate, names_j, (t[sl], t_log) if n_res else None)
     y, keep = _torque(TAU[sl], fs, cutoff_hz, decimate, sign_eps, qd[sl])
     names = tuple(names_in) + fnames
     if tuple(names) != tuple(fit.standard_names):

@@ -1,10 +1,10 @@
 """Step 2 spring models: fit tau_s = f(delta, history) to the (delta, tau_s) pairs of the two-step
-method (seed 000 eq. 7: "a suitable stiffness model can be selected by examining the relationship
+method (Lightcap and Banks (2007), eq. 7: "a suitable stiffness model can be selected by examining the relationship
 between joint deflection and stiffness torque") and choose one by held-out error.
 
 Models (signs and units: docs/conventions.md; elements: :mod:`mocapfj.dynamics`):
 
-- ``linear``:    tau_s = k delta + tau0                                  (LS, seed 000 eq. 7)
+- ``linear``:    tau_s = k delta + tau0                                  (LS, Lightcap and Banks (2007), eq. 7)
 - ``cubic``:     tau_s = k1 delta + k3 delta^3 + tau0                     (LS)
 - ``piecewise``: tau_s = PiecewiseSpring(k1, k2, k3, tau1, tau2)(delta - d0)  (nonlinear LS)
 - ``backlash``:  tau_s = Backlash(gap, LinearSpring(k))(delta - d0)           (nonlinear LS)
@@ -116,7 +116,7 @@ def _finish(model, params, element, n, pred, d, y, t):
 
 
 def fit_linear(delta, tau_s, t=None) -> SpringFit:
-    """tau_s = k delta + tau0 by least squares (seed 000 eq. 7). delta (T,) rad, tau_s (T,) N m."""
+    """tau_s = k delta + tau0 by least squares (Lightcap and Banks (2007), eq. 7). delta (T,) rad, tau_s (T,) N m."""
     d, y = _check(delta, tau_s)[:2]
     res = ls_fit(np.column_stack([d, np.ones_like(d)]), y, ("k", "tau0"))
     k, tau0 = res.values

@@ -1,20 +1,20 @@
-"""Two-step identification of one flexible joint (seed 000 §II.A, eq. 4-7).
+"""Two-step identification of one flexible joint (Lightcap and Banks (2007), §II.A, eq. 4-7).
 
-Step 1 (seed 000 eq. 5-6): the sum of the link and motor equations has no stiffness term,
+Step 1 (Lightcap and Banks (2007), eq. 5-6): the sum of the link and motor equations has no stiffness term,
 
     I q'' - mglx sin q + mgly cos q + c sign(q') + v q' + J q_m'' + b q_m' = u,
 
-linear in theta = (I, mglx, mgly, c, v, J, b); it is solved by least squares (seed 003 eq. 14-17).
-Step 2 (seed 000 eq. 7): the spring torque is reconstructed from the link side,
+linear in theta = (I, mglx, mgly, c, v, J, b); it is solved by least squares (Jubien, Abba and Gautier (2014), eq. 14-17).
+Step 2 (Lightcap and Banks (2007), eq. 7): the spring torque is reconstructed from the link side,
 
     tau_s = I q'' - mglx sin q + mgly cos q + c sign(q') + v q',
 
 and paired with the deflection delta = q_m - q; here the linear spring tau_s = k delta + tau0 is
 fitted (other spring models: :mod:`mocapfj.ident.springs`). The one-step formulation (eq. 4, link
 and motor equations stacked with k unknown) is solved too, as the baseline whose condition number
-the two-step method lowers (seed 000 §II.A, §VI).
+the two-step method lowers (Lightcap and Banks (2007), §II.A, §VI).
 
-Signs and units: docs/conventions.md. Conditioning (seed 003 §3): q and q_m are low-passed
+Signs and units: docs/conventions.md. Conditioning (Jubien, Abba and Gautier (2014), §3): q and q_m are low-passed
 (zero-phase Butterworth, `cutoff_hz`) and differentiated by central differences; u and the
 nonlinear columns (sin q, cos q, sign q') go through the same low-pass, so that the filtered step
 of c sign(q') in u is matched by the column and not read as viscous friction; every column of
@@ -69,13 +69,13 @@ class TwoStepResult:
     cond_two_step, cond_one_step : float
         Condition numbers of the step-1 and one-step observation matrices (columns unscaled).
     torque_rms : float
-        RMS of u - W theta in step 1 over the fitted rows, N m (seed 000 §V "RMS errors").
+        RMS of u - W theta in step 1 over the fitted rows, N m (Lightcap and Banks (2007), §V "RMS errors").
     q_zero_rad : float
         e = tau0 / k, the zero of the given link angle minus the true zero, rad.
     t : (N,) float
         Times of the step-2 pairs, s (decimated time base).
     tau_s : (N,) float
-        Reconstructed spring torque, N m (seed 000 eq. 7), parallel-filtered and decimated.
+        Reconstructed spring torque, N m (Lightcap and Banks (2007), eq. 7), parallel-filtered and decimated.
     delta : (N,) float
         Deflection q_m - q of the given angles, rad, same filtering; NaN-free.
     """
@@ -131,7 +131,7 @@ def _rezero(res: LSResult, e: float) -> LSResult:
 def identify_two_step(t, q, q_m, u, *, fs_hz: float, cutoff_hz: float = 30.0, decimate: int = 1,
                    parallel_cutoff_hz: float | None = None, sign_eps: float = 0.01,
                    rezero: bool = True, trim_s: float = 1.0) -> TwoStepResult:
-    """Two-step identification of one joint, seed 000 eq. (5)-(7), with eq. (4) as the baseline.
+    """Two-step identification of one joint, Lightcap and Banks (2007), eq. (5)-(7), with eq. (4) as the baseline.
 
     Parameters
     ----------
@@ -148,7 +148,7 @@ def identify_two_step(t, q, q_m, u, *, fs_hz: float, cutoff_hz: float = 30.0, de
     cutoff_hz : float
         Low-pass on q and q_m before differentiation, Hz (mocap q'' needs 5-10 Hz).
     decimate : int
-        Parallel decimation factor (seed 003 §3).
+        Parallel decimation factor (Jubien, Abba and Gautier (2014), §3).
     parallel_cutoff_hz : float, optional
         Cut-off of the parallel filter on W and u, Hz; default 0.8 x the decimated Nyquist rate,
         never above `cutoff_hz`.

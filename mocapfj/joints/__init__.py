@@ -2,7 +2,7 @@
 
 - :mod:`.axis`: hinge fits (Gamage-Lasenby, Halvorsen bias-compensated, maximum likelihood).
 - :mod:`.crlb`: Cramér-Rao bounds for the axis, the centre and the angle.
-- :mod:`.angles`: closed-form per-frame angle of one joint (seed 000 eq. 13) with outlier rejection.
+- :mod:`.angles`: closed-form per-frame angle of one joint (Lightcap and Banks (2007), eq. 13) with outlier rejection.
 - :mod:`.segments`: rigid clusters (Kabsch, templates), SCoRE and SARA for two moving segments.
 - :mod:`.chain`: batched Gauss-Newton for the joints of a chain (Pinocchio model).
 - :mod:`.sync`: common time base and deflection delta = q_m - q.

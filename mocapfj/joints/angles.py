@@ -2,7 +2,7 @@
 
 Hinge model: marker p at frame i is ``v_pi = c + R(n, q_i) a_p + noise`` in the parent frame, with
 n = ``geometry.axis``, c = ``geometry.point`` and a_p = ``geometry.template[p]``. The angle of each
-frame minimises seed 000 eq. (13), ``sum_p w_p |v_pi - (c + R(n, q) a_p)|^2``, whose minimiser is
+frame minimises Lightcap and Banks (2007), eq. (13), ``sum_p w_p |v_pi - (c + R(n, q) a_p)|^2``, whose minimiser is
 exact and unique (shared/notes/methods.md, "Per-frame angle, exact closed form")::
 
     b_pi = v_pi - c,   a_p_perp = a_p - (a_p . n) n
@@ -32,7 +32,7 @@ _ON_AXIS_M = 1e-6  # a marker closer than this to the axis carries no angle info
 
 
 def predict_markers(geometry: JointGeometry, q) -> np.ndarray:
-    """Marker positions the hinge model predicts, ``c + R(n, q_i) a_p`` (seed 000 eq. 13).
+    """Marker positions the hinge model predicts, ``c + R(n, q_i) a_p`` (Lightcap and Banks (2007), eq. 13).
 
     Parameters
     ----------
@@ -67,7 +67,7 @@ def outlier_threshold(outlier_sigma: float, dof: int = 3) -> float:
 
 def joint_angles(v, geometry: JointGeometry, t=None, *, sigma=None, weights=None, min_markers=2,
                  outlier_sigma=4.0, q_seed=None) -> JointAngles:
-    """Link angle of every frame: the exact minimiser of seed 000 eq. (13), with its Cramér-Rao SD.
+    """Link angle of every frame: the exact minimiser of Lightcap and Banks (2007), eq. (13), with its Cramér-Rao SD.
 
     Parameters
     ----------

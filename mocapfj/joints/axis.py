@@ -1,12 +1,12 @@
 """Axis and centre of one revolute joint from a marker cluster: three levels (methods.md).
 
-Hinge model (seed 000 §III): marker p in frame i is at v_pi = c + R(n, q_i) a_p + noise, with unit
+Hinge model (Lightcap and Banks (2007), §III): marker p in frame i is at v_pi = c + R(n, q_i) a_p + noise, with unit
 axis n, a point c on the axis, template a_p and per-frame angle q_i, in the parent (world) frame.
 
-- `fit_gamage_lasenby`: algebraic (Gamage & Lasenby 2002; seed 000 eq. 11). Consistent axis,
+- `fit_gamage_lasenby`: algebraic (Gamage & Lasenby 2002; Lightcap and Banks (2007), eq. 11). Consistent axis,
   biased centre at small ranges of motion.
-- `fit_halvorsen`: bias-compensated centre (Halvorsen 2003; seed 000 eq. 12).
-- `fit_hinge_ml`: maximum likelihood over axis, centre, template and every angle (seed 000
+- `fit_halvorsen`: bias-compensated centre (Halvorsen 2003; Lightcap and Banks (2007), eq. 12).
+- `fit_hinge_ml`: maximum likelihood over axis, centre, template and every angle (Lightcap and Banks (2007)
   eq. 13 jointly), by Gauss-Newton with the angles eliminated frame by frame (variable projection
   with the closed-form angle of methods.md); covariances from the marginalised information.
 
@@ -67,7 +67,7 @@ def _prepare(v, labels, weights=None):
 
 
 def _gl_core(v):
-    """Gamage-Lasenby moments and fit, batched over leading axes (seed 000 eq. 11).
+    """Gamage-Lasenby moments and fit, batched over leading axes (Lightcap and Banks (2007), eq. 11).
 
     v (..., N, P, 3), NaN where missing. Returns axis (..., 3), in-plane centre m (..., 3) (the
     foot of the origin on the axis: truncated pseudo-inverse), and the per-marker moments about
@@ -94,7 +94,7 @@ def _gl_core(v):
 
 
 def _halvorsen_core(v, core, sigma=None, max_iter=50, tol=1e-12):
-    """Bias-compensated centre (Halvorsen 2003; seed 000 eq. 12), batched like `_gl_core`.
+    """Bias-compensated centre (Halvorsen 2003; Lightcap and Banks (2007), eq. 12), batched like `_gl_core`.
 
     Solves A m = b - Δb, Δb = 2 sigma^2 sum_p f_p (mean_i v_pi - m), f_p = 1 - 1/N_p (the exact
     finite-N noise terms of A and b), in the plane normal to the axis (truncated pseudo-inverse),
@@ -145,7 +145,7 @@ def _cluster_range(vc, mask, n):
 
 # ---------------------------------------------------------------- angles and template
 def _angles(vc, mask, w, n, c, a):
-    """Closed-form per-frame angles (methods.md; the minimiser of seed 000 eq. 13), (N,) rad
+    """Closed-form per-frame angles (methods.md; the minimiser of Lightcap and Banks (2007), eq. 13), (N,) rad
     in (-pi, pi]; NaN where no marker carries angle information."""
     bz = np.where(mask[..., None], vc - c, 0.0)
     wm = mask * w
@@ -298,7 +298,7 @@ def _algebraic(v, labels, method, sigma, max_iter, tol, n_boot, min_range_deg):
 
 # ---------------------------------------------------------------- public fits
 def fit_gamage_lasenby(v, labels=None, *, n_boot=200, min_range_deg=MIN_RANGE_DEG) -> JointGeometry:
-    """Algebraic axis and centre (Gamage & Lasenby 2002; seed 000 eq. 11; methods.md).
+    """Algebraic axis and centre (Gamage & Lasenby 2002; Lightcap and Banks (2007), eq. 11; methods.md).
 
     A = 2 sum_p Cov_i(v_p), b = sum_p [mean(|v|^2 v) - mean(|v|^2) mean(v)] (per-marker
     statistics over the frames where the marker is seen); axis = eigenvector of A with the
@@ -335,7 +335,7 @@ def fit_gamage_lasenby(v, labels=None, *, n_boot=200, min_range_deg=MIN_RANGE_DE
 
 def fit_halvorsen(v, labels=None, sigma=None, max_iter=50, tol=1e-12, *, n_boot=200,
                   min_range_deg=MIN_RANGE_DEG) -> JointGeometry:
-    """Bias-compensated axis and centre (Halvorsen 2003; seed 000 eq. 12; methods.md).
+    """Bias-compensated axis and centre (Halvorsen 2003; Lightcap and Banks (2007), eq. 12; methods.md).
 
     Iterates m <- A^+ (b - Δb), Δb = 2 sigma^2 sum_p (1 - 1/N_p)(mean_i v_pi - m), in the plane
     normal to the Gamage-Lasenby axis (the truncated pseudo-inverse keeps the hinge's free
@@ -360,7 +360,7 @@ def fit_halvorsen(v, labels=None, sigma=None, max_iter=50, tol=1e-12, *, n_boot=
 
 def fit_hinge_ml(v, labels=None, init=None, weights=None, *, max_iter=50,
                  min_range_deg=MIN_RANGE_DEG) -> tuple[JointGeometry, np.ndarray]:
-    """Maximum-likelihood hinge: axis, centre, template and every angle (methods.md; seed 000 eq. 13).
+    """Maximum-likelihood hinge: axis, centre, template and every angle (methods.md; Lightcap and Banks (2007), eq. 13).
 
     Minimises sum_pi w_p |v_pi - (c + R(n, q_i) a_p)|^2 over the axis (tangent-plane update, 2),
     the centre (2, in the plane normal to the axis), the template (3 P; gauge: mean a_p.n = 0)

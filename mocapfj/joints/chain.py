@@ -1,6 +1,6 @@
 """Per-frame angles of all revolute joints of a kinematic chain from markers on its links.
 
-Seed 000 eq. (13) fits one angle per frame by matching predicted to measured marker positions;
+Lightcap and Banks (2007), eq. (13) fits one angle per frame by matching predicted to measured marker positions;
 here the prediction is the forward kinematics of a whole chain (or tree) read from a Pinocchio
 model, and all joint angles of a frame are fitted at once:
 
@@ -300,7 +300,7 @@ def _require_some(ok: np.ndarray) -> None:
 def solve_chain(model: ChainModel, v_world, *, t=None, q0=None, sigma: float | None = None, max_iter: int = 10,
                 tol: float = 1e-10, outlier_sigma: float | None = 4.0, min_markers_per_link: int = 1,
                 block_frames: int = 32) -> ChainAngles:
-    """Joint angles of every frame by batched Gauss-Newton on seed 000 eq. (13) over the chain.
+    """Joint angles of every frame by batched Gauss-Newton on Lightcap and Banks (2007), eq. (13) over the chain.
 
     Parameters
     ----------
@@ -314,7 +314,7 @@ def solve_chain(model: ChainModel, v_world, *, t=None, q0=None, sigma: float | N
         Seeds, rad. (T, n), e.g. the motor angles: every frame starts from its own row and all
         frames are solved at once. (n,) or None (zeros): a seeding pass runs in blocks of
         `block_frames` frames, each block seeded by linear extrapolation of the block before it
-        (the first block from q0 with up to 5 x max_iter iterations) -- seed 000 seeds each
+        (the first block from q0 with up to 5 x max_iter iterations) -- Lightcap and Banks (2007) seeds each
         frame with the previous one; blocks keep that idea vectorised, at ~10x the cost of
         per-frame seeds. It assumes the first pose is within about 1 rad of q0 and that the
         extrapolation errs by less than about 0.5 rad within a block.

@@ -1,6 +1,6 @@
 """Cramér-Rao bounds for a revolute joint seen through a marker cluster (docs/conventions.md).
 
-Hinge model (seed 000 §III, eq. 13): marker p in frame i is at
+Hinge model (Lightcap and Banks (2007), §III, eq. 13): marker p in frame i is at
 
     v_pi = c + R(n, q_i) a_p + e_pi,      e_pi ~ N(0, sigma_p^2 I),   sigma_p = sigma / sqrt(w_p)
 

@@ -58,7 +58,7 @@ def subtree_sums(model, X: np.ndarray) -> np.ndarray:
 
 
 def normal_equations(model, q, v, w, with_A: bool = True):
-    """Gauss-Newton normal equations of seed 000 eq. (13) with marker weights w (M, F).
+    """Gauss-Newton normal equations of Lightcap and Banks (2007), eq. (13) with marker weights w (M, F).
 
     A = J^T W J and b = J^T W (v - y), with J_mj = n_j x (y_m - o_j) for the joints j upstream of
     marker m (n_j, o_j: world axis and origin of joint j), are summed from marker moments instead

@@ -1,4 +1,4 @@
-"""Stream synchronisation and joint deflection (seed 000 eq. 7: delta = q_m - q).
+"""Stream synchronisation and joint deflection (Lightcap and Banks (2007), eq. 7: delta = q_m - q).
 
 The mocap and controller clocks are put on one time base by the offset recording.toml declares
 (from a hardware sync): t_controller = t_mocap + clock_offset_s. Nothing else is aligned: the

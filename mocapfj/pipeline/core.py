@@ -78,7 +78,7 @@ def inspect_path(path: str | Path) -> dict:
 
 def default_scenario(name: str = "pa10_joint2") -> Path:
     """A shipped scenario file: datasets/NAME.toml in the working directory or beside the package."""
-    for root in (Path.cwd(), Path(__file__).resolve().parents[1]):
+    for root in (Path.cwd(), Path(__file__).resolve().parents[2]):
         p = root / "datasets" / f"{name}.toml"
         if p.is_file():
             return p

@@ -1,4 +1,4 @@
-"""A ring of motion-capture cameras around the robot (seed 000 §IV.A: eight cameras).
+"""A ring of motion-capture cameras around the robot (Lightcap and Banks (2007), §IV.A: eight cameras).
 
 Cameras stand on a circle around the workspace, alternately high and low, and look at a common
 target point. Defaults are those of a typical 1.3 MP mocap camera: 1280 x 1024 px, about 60 deg

@@ -1,10 +1,10 @@
 """Marker clusters on the link surfaces of an arm, and their world positions over time.
 
-Seed 000 §III-IV: clusters of three or four reflective markers on the exterior surface of the
+Lightcap and Banks (2007), §III-IV: clusters of three or four reflective markers on the exterior surface of the
 links (Fig. 2). Each marker centre sits one marker radius (default 7 mm, a 14 mm sphere) above
 the link surface along the surface normal, so that the sphere touches the link. Within a
 cluster the markers are spread apart and their radii from the link's joint axis (the z axis of
-the link frame, seed 002 eq. (1)) differ, which the axis fits of seed 000 eqs. (11)-(12) need.
+the link frame, Bompos et al. (2007), eq. (1)) differ, which the axis fits of Lightcap and Banks (2007), eqs. (11)-(12) need.
 Labels are ``B_1..`` on the base and ``L<k>_1..`` on link k.
 """
 
@@ -124,7 +124,7 @@ def place_markers(geometry: ArmGeometry, rng: np.random.Generator, *,
     rng : numpy.random.Generator
         The only source of randomness: the same seed gives the same layout.
     clusters : mapping link -> count
-        Markers per link; 3-4 as in seed 000.
+        Markers per link; 3-4 as in Lightcap and Banks (2007).
     radius_m : float
         Marker sphere radius, metres.
     min_radius_gap_m : float

@@ -1,6 +1,6 @@
 """Turn a scenario into a recording bundle that looks like a real lab's, plus its truth.
 
-The chain: simulate the true system under PD motor position control (seed 000 eq. 4 per joint,
+The chain: simulate the true system under PD motor position control (Lightcap and Banks (2007), eq. 4 per joint,
 or one Pinocchio model for ``model = "urdf"``) on the controller's clock; log the controller
 (resolver-quantised q_m, torque with current noise); pose the PA-10-like arm at the instants the
 mocap samples (the declared clock offset plus any planted `time_delay`); place marker clusters,

@@ -1,16 +1,16 @@
 """A PA-10-like 6-DoF arm: modified D-H kinematics and link meshes for synthetic recordings.
 
-Kinematics follow seed 002 (Mitsubishi PA-10, Table I), which uses the **modified**
+Kinematics follow Bompos et al. (2007) (Mitsubishi PA-10, Table I), which uses the **modified**
 Denavit-Hartenberg convention (Craig), eq. (1):
 
     T_{i-1,i} = Rot_x(alpha_{i-1}) Trans_x(a_{i-1}) Rot_z(theta_i) Trans_z(d_i)
 
-Table I describes the 7-DoF PA-10. The 6-DoF arm here is the PA10-6C(E) of seed 000 (§IV.A):
-the redundant joint 3 (S3) is locked at theta_3 = 0, as in seed 002's reference [1], so joints
+Table I describes the 7-DoF PA-10. The 6-DoF arm here is the PA10-6C(E) of Lightcap and Banks (2007) (§IV.A):
+the redundant joint 3 (S3) is locked at theta_3 = 0, as in Bompos et al.'s reference [1], so joints
 1..6 of this arm are rows 1, 2, 4, 5, 6, 7 of Table I. Link k is the rigid body moved by joint k;
 its frame is the D-H frame of its row (link 2 carries the locked frame 3). Link 0 is the base
 (and the table it stands on), fixed in the world. The frame of link 6 has its origin at the tool
-flange. The robot stands upright on a 0.6 m table (seed 000 §IV.A), so the default base pose is
+flange. The robot stands upright on a 0.6 m table (Lightcap and Banks (2007), §IV.A), so the default base pose is
 a translation of 0.6 m along world z.
 
 Link meshes are built from trimesh primitives sized like a PA-10 (radii 45-90 mm); they are
@@ -40,7 +40,7 @@ __all__ = [
 
 _D = np.pi / 180.0
 PA10_MDH = np.array([
-    # alpha_{i-1} [rad], a_{i-1} [m], d_i [m], theta_i offset [rad]   (seed 002 Table I)
+    # alpha_{i-1} [rad], a_{i-1} [m], d_i [m], theta_i offset [rad]   (Bompos et al. (2007), Table I)
     [0.0, 0.0, 0.317, 0.0],
     [-90.0 * _D, 0.0, 0.0, 0.0],
     [90.0 * _D, 0.0, 0.45, 0.0],
@@ -55,11 +55,11 @@ PA10_6DOF_ROWS = (0, 1, 3, 4, 5, 6)
 """Rows of PA10_MDH driven by joints 1..6 of the 6-DoF arm; row 2 (S3) is locked at 0."""
 
 TABLE_HEIGHT_M = 0.6
-"""Height of the table the robot stands on, seed 000 §IV.A."""
+"""Height of the table the robot stands on, Lightcap and Banks (2007), §IV.A."""
 
 
 def mdh_transform(alpha, a, d, theta) -> np.ndarray:
-    """Modified D-H transform T_{i-1,i} of seed 002 eq. (1), broadcast over the inputs.
+    """Modified D-H transform T_{i-1,i} of Bompos et al. (2007), eq. (1), broadcast over the inputs.
 
     Parameters
     ----------
@@ -98,7 +98,7 @@ def forward_kinematics(q, *, T_world_base=None, mdh=PA10_MDH, joint_rows=PA10_6D
     T_world_base : (4, 4) float, optional
         Pose of the robot base in the world; default `base_pose()` (0.6 m table).
     mdh : (R, 4) float
-        Modified D-H rows (alpha_{i-1}, a_{i-1}, d_i, theta offset); default seed 002 Table I.
+        Modified D-H rows (alpha_{i-1}, a_{i-1}, d_i, theta offset); default Bompos et al. (2007), Table I.
     joint_rows : sequence of J int
         Rows of `mdh` that are actuated, increasing; the others are locked at their offset.
 

@@ -78,7 +78,7 @@ class Measurement:
 
 @dataclass(frozen=True)
 class ScenarioJoint:
-    """One moving joint: PA-10 joint number, parameters of seed 000 eq. (4), reference, PD gains."""
+    """One moving joint: PA-10 joint number, parameters of Lightcap and Banks (2007), eq. (4), reference, PD gains."""
 
     name: str
     axis: int                      # PA-10 joint number 1..6
@@ -90,7 +90,7 @@ class ScenarioJoint:
     b: float
     friction: dict
     spring: dict
-    reference: dict                # f0_hz, q0_rad, amplitudes_rad, phases_rad (seed 000 eq. 9)
+    reference: dict                # f0_hz, q0_rad, amplitudes_rad, phases_rad (Lightcap and Banks (2007), eq. 9)
     kp: float
     kd: float
     ki: float = 0.0
@@ -249,7 +249,7 @@ def load_scenario(path: str | os.PathLike[str]) -> Scenario:
 
 
 def reference_trajectory(ref: dict):
-    """Motor reference of seed 000 eq. (9), a finite Fourier series, as a function of t.
+    """Motor reference of Lightcap and Banks (2007), eq. (9), a finite Fourier series, as a function of t.
 
     q_ref(t) = q0 + s(t) sum_l a_l [sin(l w t + phi_l) - sin(phi_l)],  w = 2 pi f0,
     with a smooth ramp s(t) from 0 to 1 over ``ramp_s`` (a C1 start from rest at q0).
@@ -337,7 +337,7 @@ def joint_models(scn: Scenario, with_effects: bool = True, smoothing: float = 1e
 
 
 def nominal_parameters(j: ScenarioJoint) -> dict:
-    """The seed-000 parameter set of a joint (names as in seed 000 Table I) plus its elements."""
+    """The seed-000 parameter set of a joint (names as in Lightcap and Banks (2007), Table I) plus its elements."""
     return {"I": j.I, "J": j.J, "mglx": j.mglx, "mgly": j.mgly, "b": j.b, "gear_ratio": j.gear_ratio,
             "friction": j.friction, "spring": j.spring}
 

@@ -2,8 +2,8 @@
 
 A link turns about the world z axis through a known centre following q(t); four markers ride on
 it at radii 80-140 mm; three more sit still on the base. The controller log holds the motor
-angle q_m = q + tau / k (a linear spring, seed 000 eq. 7) and the torque of a rigid pendulum
-free of gravity, I q'' + v q' (seed 000 eq. 4 with mgl = c = 0). Marker noise is Gaussian and
+angle q_m = q + tau / k (a linear spring, Lightcap and Banks (2007), eq. 7) and the torque of a rigid pendulum
+free of gravity, I q'' + v q' (Lightcap and Banks (2007), eq. 4 with mgl = c = 0). Marker noise is Gaussian and
 some samples drop out. The full simulator (issue 3) supersedes this for identification work; it
 is kept because it is small, exact and fast.
 """

@@ -4,7 +4,7 @@ Joint frames come from the same modified D-H chain as `robot_mesh.forward_kinema
 dynamics of a URDF scenario and its rendered markers agree exactly. Joints that a scenario does
 not move are braked: they become fixed joints at their pose. Each link's mass, centre of mass
 and inertia are those of its rendered primitives (`robot_mesh.pa10_geometry`) at a uniform
-density, plus an optional payload at the flange (seed 000 §IV.A hung 44.5 N there). These
+density, plus an optional payload at the flange (Lightcap and Banks (2007), §IV.A hung 44.5 N there). These
 inertias are plausible for a PA-10-sized arm, not measured values of a PA-10.
 """
 

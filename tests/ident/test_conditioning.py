@@ -4,7 +4,7 @@ References: central differences of sin(w t) have the truncation errors of a Tayl
 (d1 error ~ (w dt)^2 / 6, the twice-applied gradient ~ (w dt)^2 / 3 relative); a Butterworth
 filter has |H(fc)| = 1/sqrt(2) (-3 dB) at its cut-off, so forward-backward filtering gives
 |H(fc)|^2 = 1/2 (-6 dB) there with zero phase at every frequency; parallel decimation
-(seed 003 §3, Gautier 1997) filters W and y with the same linear filter, so y = W x survives it.
+(Jubien, Abba and Gautier (2014), §3, Gautier 1997) filters W and y with the same linear filter, so y = W x survives it.
 """
 
 from __future__ import annotations

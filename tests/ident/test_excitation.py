@@ -1,4 +1,4 @@
-"""Excitation design (mocapfj.ident.excitation; seed 000 §II.B eq. 8-10, Table I joint 2)."""
+"""Excitation design (mocapfj.ident.excitation; Lightcap and Banks (2007), §II.B eq. 8-10, Table I joint 2)."""
 
 from __future__ import annotations
 
@@ -14,7 +14,7 @@ from mocapfj.synth.scenario import joint_models, load_scenario, reference_trajec
 
 ROOT = Path(__file__).resolve().parents[2]
 SCENARIO = ROOT / "datasets" / "pa10_joint2.toml"
-# seed 000 Table I, joint 2 means; k of the scenario's linear spring
+# Lightcap and Banks (2007), Table I, joint 2 means; k of the scenario's linear spring
 PARAMS = dict(I=6.15, k=1.19e4, mglx=111.64, mgly=-7.80, c=9.28, v=18.38, J=12.57, b=23.28)
 
 
@@ -87,7 +87,7 @@ def test_optimised_condition_beats_single_sine_and_hand_made(design, hand):
 
 
 def test_full_simulation_confirms_the_ranking(design, hand):
-    """Seed 000 eq. (10): the nominal joint simulated with the motor prescribed, one steady period."""
+    """Lightcap and Banks (2007), eq. (10): the nominal joint simulated with the motor prescribed, one steady period."""
     model = joint_models(load_scenario(SCENARIO), with_effects=False)["j2"]
     c_opt, res = simulated_condition(design.reference, model, duration_s=12.0)
     c_hand, _ = simulated_condition(hand[0], model, duration_s=12.0)

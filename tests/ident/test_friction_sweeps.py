@@ -2,8 +2,8 @@
 
 The recordings are synthesised directly: a staircase of velocity levels joined by 0.2 s cosine
 ramps (where the torque also carries I q'', so a plateau finder that let ramps in would bias the
-points), the true friction model + gravity G(q) + seeded Gaussian torque noise. Truths: seed 001
-Table I (Staubli RX-170B axis 2, asymmetric Stribeck eq. 7) and seed 002 Table II joint 1
+points), the true friction model + gravity G(q) + seeded Gaussian torque noise. Truths: Oueslati et al. (2012)
+Table I (Staubli RX-170B axis 2, asymmetric Stribeck eq. 7) and Bompos et al. (2007), Table II joint 1
 (PA-10, eq. 18, both sides).
 """
 
@@ -18,10 +18,10 @@ from mocapfj.errors import InputError
 from mocapfj.ident.friction import (FrictionFit, SweepPoints, fit_extended_stribeck, fit_presliding, fit_stribeck,
                                     sweep_points)
 
-# seed 001 Table I, joint 2 (positive / negative velocity), exponent 2
+# Oueslati et al. (2012), Table I, joint 2 (positive / negative velocity), exponent 2
 STAUBLI = AsymmetricStribeck(fc_pos=122.19, fs_pos=148.54, vs_pos=0.009, fv_pos=336.73,
                              fc_neg=87.02, fs_neg=111.38, vs_neg=0.009, fv_neg=294.44)
-# seed 002 Table II, joint 1 (positive / negative velocity)
+# Bompos et al. (2007), Table II, joint 1 (positive / negative velocity)
 PA10_J1 = ExtendedStribeck(f=(0.4362, 0.6632, 0.4469, 0.0622, 0.5612, 16.9787),
                            f_neg=(0.3952, 0.8550, 0.6203, 0.0583, 0.7244, 19.1778))
 RATE_HZ = 500.0
@@ -131,8 +131,8 @@ def test_sweep_points_settle_and_min_duration():
 # --------------------------------------------------------------------------- Stribeck
 
 
-def test_fit_stribeck_recovers_seed001_table1():
-    """Full pipeline on seed 001 Table I (axis 2), 16 plateaus per side, 2 N m noise.
+def test_fit_stribeck_recovers_oueslati_table1():
+    """Full pipeline on Oueslati et al. (2012), Table I (axis 2), 16 plateaus per side, 2 N m noise.
 
     Measured (seed 1): fc_pos 122.177 (122.19), fs_pos 148.495 (148.54), vs_pos 0.009033 (0.009),
     fv_pos 336.65 (336.73), fc_neg 87.046 (87.02), fs_neg 111.417 (111.38), vs_neg 0.008970
@@ -186,10 +186,10 @@ def test_fit_stribeck_symmetric():
         assert abs(fit.params[k] - truth.params[k]) < 3 * fit.std[k]
 
 
-# --------------------------------------------------------------------------- seed 002 eq. (18)
+# --------------------------------------------------------------------------- Bompos et al. (2007), eq. (18)
 
 
-def test_fit_extended_stribeck_recovers_seed002_table2_joint1():
+def test_fit_extended_stribeck_recovers_bompos_table2_joint1():
     """Full pipeline on Table II joint 1, 24 plateaus per side from 0.001 to 1 rad/s, 0.01 N m
     torque noise (se about 4.5e-4 N m per plateau).
 
@@ -228,7 +228,7 @@ def test_fit_extended_stribeck_std_matches_monte_carlo():
 
 
 def test_presliding_recovers_fs_and_sigma0():
-    """Seed 001's start-of-motion experiment: 5.931e-5 rad/s for 20 s, torque from the Dahl
+    """Oueslati et al.'s start-of-motion experiment: 5.931e-5 rad/s for 20 s, torque from the Dahl
     element (Fs 148.54 N m, sigma0 1.5e6 N m/rad, i.e. 1e-4 rad to saturate to 63 %) + 1 N m noise,
     in both directions.
 

@@ -15,7 +15,7 @@ from mocapfj.synth.scenario import load_scenario
 
 DATASETS = Path(__file__).resolve().parents[2] / "datasets"
 TABLE1_J2 = {"I": 6.15, "mglx": 111.64, "mgly": -7.80, "c": 9.28, "v": 18.38, "J": 12.57, "b": 23.28, "k": 1.19e4}
-# seed 000 Table I, joint 2: CV % over its 10 repeated trials
+# Lightcap and Banks (2007), Table I, joint 2: CV % over its 10 repeated trials
 TABLE1_CV = {"I": 9.62, "mglx": 4.47, "mgly": 16.89, "c": 11.07, "v": 6.82, "J": 5.33, "b": 6.15, "k": 4.74}
 
 
@@ -42,7 +42,7 @@ def test_identify_json_table_and_cv(three_trials, capsys):
     assert {"cond_two_step", "cond_one_step", "torque_rms", "spring", "cv_pct", "frames_filled"} <= set(j)
     assert {"model", "params", "r2"} <= set(j["spring"])
     assert j["spring"]["model"] == "linear" and j["spring"]["n_trials_chosen"] == 3
-    assert j["cond_two_step"] < j["cond_one_step"]  # seed 000's argument for the two-step method
+    assert j["cond_two_step"] < j["cond_one_step"]  # Lightcap and Banks' argument for the two-step method
     err = {n: 100 * (j["params"][n]["value"] / v - 1) for n, v in TABLE1_J2.items()}
     print("mean error %:", {n: round(e, 2) for n, e in err.items()}, "CV %:", {n: round(c, 2) for n, c in j["cv_pct"].items()})
     for n in TABLE1_J2:

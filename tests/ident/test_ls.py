@@ -1,4 +1,4 @@
-"""Least squares with statistics (mocapfj.ident.ls; seed 003 eq. 15-17)."""
+"""Least squares with statistics (mocapfj.ident.ls; Jubien, Abba and Gautier (2014), eq. 15-17)."""
 
 from __future__ import annotations
 

@@ -1,5 +1,5 @@
 """n-link flexible-joint identification (mocapfj.ident.nlink) on pa10_joints23: joints 2 and 3
-moving together through Pinocchio, seed 000 Table I motor, friction and spring parameters."""
+moving together through Pinocchio, Lightcap and Banks (2007), Table I motor, friction and spring parameters."""
 
 from __future__ import annotations
 
@@ -14,7 +14,7 @@ from mocapfj.ident.nlink import identify_nlink_motor_first
 from mocapfj.ident.regressor import base_from_standard, standard_parameters
 
 ROOT = Path(__file__).resolve().parents[2]
-FC, FV = np.array([9.28, 5.81]), np.array([18.38, 5.79])        # seed 000 Table I, joints 2 and 3
+FC, FV = np.array([9.28, 5.81]), np.array([18.38, 5.79])        # Lightcap and Banks (2007), Table I, joints 2 and 3
 MOTOR = {"j2": dict(J=12.57, b=23.28, k=1.19e4), "j3": dict(J=2.48, b=6.35, k=4.60e3)}
 
 

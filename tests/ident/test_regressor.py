@@ -18,7 +18,7 @@ from mocapfj.ident.ls import ls_fit
 from mocapfj.ident.regressor import base_from_standard, base_parameters, load_pin_model, nlink_regressor, standard_parameters
 from mocapfj.synth.urdf import pa10_urdf
 
-FC, FV = np.array([9.28, 5.81]), np.array([18.38, 5.79])  # seed 000 Table I, joints 2 and 3
+FC, FV = np.array([9.28, 5.81]), np.array([18.38, 5.79])  # Lightcap and Banks (2007), Table I, joints 2 and 3
 
 
 @pytest.fixture(scope="module")
@@ -145,3 +145,42 @@ def test_bad_inputs(urdf):
         standard_parameters(urdf, coulomb=[1.0, 2.0, 3.0])
     with pytest.raises(InputError, match="p names"):
         base_parameters(np.ones((10, 3)), ["a", "b"])
+
+
+def test_rounding_level_columns_are_not_base_parameters():
+    """A URDF whose joint origins are rotated by rpy = +-pi/2 (mocapfj.synth.rigid.arm_urdf): the
+    exact regressor has columns that are zero, which float64 leaves at 1e-16 (cos(pi/2) = 6e-17).
+    Scaled to unit norm such a column looks independent of everything; it must be treated as zero
+    (the review found mz_j2 kept as a base parameter, fitted as 1.9e-14 +- 8.8e13 at cond 5e16)."""
+    from mocapfj.ident.ls import ZERO_COLUMN_RTOL, ls_fit
+    from mocapfj.synth.rigid import arm_urdf
+
+    urdf = arm_urdf(3, seed=1)
+    assert 'rpy="-1.5707963267948966 0 0"' in urdf
+    rng = np.random.default_rng(4)
+    q, qd, qdd = rng.uniform(-2, 2, (300, 3)), rng.uniform(-2, 2, (300, 3)), rng.uniform(-5, 5, (300, 3))
+    W, names = nlink_regressor(urdf, q, qd, qdd, armature=True)
+    norms = np.linalg.norm(W, axis=0)
+    tiny = [names[i] for i in np.flatnonzero((norms > 0) & (norms < 1e-9 * norms.max()))]
+    assert tiny, "the rpy = pi/2 rotation leaves rounding-level columns"
+    base_idx, Kd, base_names = base_parameters(W, names)
+    assert not set(tiny) & {names[i] for i in base_idx}
+    assert np.linalg.norm(W[:, base_idx], axis=0).min() > ZERO_COLUMN_RTOL * norms.max()
+    res = ls_fit(W[:, base_idx], W[:, base_idx] @ np.ones(len(base_idx)), base_names)
+    assert res.cond < 1e6 and np.allclose(res.values, 1.0)
+    # the same column handed to ls_fit is named, not solved
+    i = names.index(tiny[0])
+    with pytest.raises(InputError, match=rf"no independent excitation of \['{tiny[0]}'\]"):
+        ls_fit(W[:, list(base_idx) + [i]], W[:, base_idx] @ np.ones(len(base_idx)), list(base_names) + [tiny[0]])
+
+
+def test_ls_fit_refuses_what_float64_cannot_resolve():
+    from mocapfj.ident.ls import MAX_SCALED_COND, ls_fit
+
+    rng = np.random.default_rng(5)
+    a = rng.normal(size=500)
+    W = np.column_stack([a, a + 1e-11 * rng.normal(size=500), rng.normal(size=500)])
+    with pytest.raises(InputError, match=r"excitation: expected a condition number below 1e\+10 \(columns scaled\)|"
+                                         r"no independent excitation"):
+        ls_fit(W, a, ["x", "y", "z"])
+    assert MAX_SCALED_COND == 1e10

@@ -1,4 +1,4 @@
-"""Step-2 spring models and their selection (mocapfj.ident.springs; seed 000 eq. 7)."""
+"""Step-2 spring models and their selection (mocapfj.ident.springs; Lightcap and Banks (2007), eq. 7)."""
 
 from __future__ import annotations
 

@@ -58,7 +58,7 @@ def test_the_planted_spring_is_selected_and_its_coefficients_recovered(identifie
 @pytest.mark.parametrize("identified", ["bouc_wen"], indirect=True)
 def test_the_hysteresis_loop_dissipates_the_true_energy(identified):
     """The fitted Bouc-Wen element along the measured deflection dissipates what the true one
-    does along the same path, within 10 % (measured 0.318 J vs 0.329 J; the seed 000 step-2 route through the link-side spring
+    does along the same path, within 10 % (measured 0.318 J vs 0.329 J; the Lightcap and Banks (2007) step-2 route through the link-side spring
     torque cannot see the loop at all: the motor's viscous b absorbs it)."""
     name, res, delta = identified
     from mocapfj.ident.conditioning import lowpass

@@ -21,7 +21,7 @@ DATASETS = Path(__file__).resolve().parents[2] / "datasets"
 
 @pytest.fixture(scope="module")
 def pa10_joint2(tmp_path_factory):
-    """20 s of pa10_joint2 (seed 000 Table I, 0.2 mm marker noise) and its joints output."""
+    """20 s of pa10_joint2 (Lightcap and Banks (2007), Table I, 0.2 mm marker noise) and its joints output."""
     root = tmp_path_factory.mktemp("pa10")
     sr = record_scenario(load_scenario(DATASETS / "pa10_joint2.toml").with_duration(20.0), with_concealment=False)
     write_scenario_bundle(sr, root / "bundle")
@@ -52,8 +52,8 @@ def test_geometry_and_reported_numbers(pa10_joint2):
     (j,) = summary["joints"]
     truth = json.loads((root / "bundle" / "truth.json").read_text())["joints"][0]
     np.testing.assert_allclose(np.asarray(j["radii_mm"]) / 1e3, truth["marker_radii_m"], atol=1e-3)
-    assert max(j["radius_rms_mm"]) <= 0.3  # seed 000 reports <= 0.3 mm
-    assert 0.2 < j["marker_rms_mm"] < 1.1  # seed 000 reports 0.5-1.1 mm on a real PA-10
+    assert max(j["radius_rms_mm"]) <= 0.3  # Lightcap and Banks (2007) reports <= 0.3 mm
+    assert 0.2 < j["marker_rms_mm"] < 1.1  # Lightcap and Banks (2007) reports 0.5-1.1 mm on a real PA-10
     assert j["angle_sigma_rad"] == pytest.approx(truth["angle_sigma_rad"], rel=0.02)
     assert j["n_frames"] == 5001 and j["n_frames_invalid"] <= 5 and j["parent_static"] is True and j["method"] == "ml"
     assert 30 < j["q_range_deg"] < 50

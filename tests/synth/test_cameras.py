@@ -1,4 +1,4 @@
-"""mocapfj.synth.cameras: the ring rig around the robot (seed 000 §IV.A: eight cameras)."""
+"""mocapfj.synth.cameras: the ring rig around the robot (Lightcap and Banks (2007), §IV.A: eight cameras)."""
 
 import numpy as np
 import pytest

@@ -1,4 +1,4 @@
-"""mocapfj.synth.markers: clusters on link surfaces (seed 000 §III-IV) and their motion."""
+"""mocapfj.synth.markers: clusters on link surfaces (Lightcap and Banks (2007), §III-IV) and their motion."""
 
 import numpy as np
 import pytest

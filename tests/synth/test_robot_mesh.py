@@ -1,4 +1,4 @@
-"""mocapfj.synth.robot_mesh: PA-10 modified D-H kinematics (seed 002 Table I) and link meshes."""
+"""mocapfj.synth.robot_mesh: PA-10 modified D-H kinematics (Bompos et al. (2007), Table I) and link meshes."""
 
 import numpy as np
 import pytest
@@ -8,7 +8,7 @@ from mocapfj.errors import InputError
 from mocapfj.synth.robot_mesh import (PA10_MDH, TABLE_HEIGHT_M, base_pose, forward_kinematics, mdh_transform,
                                       pa10_geometry, posed_meshes)
 
-D1, D3, D5, D7 = 0.317, 0.45, 0.48, 0.07             # seed 002 Table I, d_i in metres
+D1, D3, D5, D7 = 0.317, 0.45, 0.48, 0.07             # Bompos et al. (2007), Table I, d_i in metres
 
 
 def _rx(a):
@@ -30,7 +30,7 @@ def _tr(x, y, z):
 
 
 def test_mdh_transform_is_rotx_transx_rotz_transz():
-    # seed 002 eq. (1) is the product Rot_x(alpha) Trans_x(a) Rot_z(theta) Trans_z(d)
+    # Bompos et al. (2007), eq. (1) is the product Rot_x(alpha) Trans_x(a) Rot_z(theta) Trans_z(d)
     rng = np.random.default_rng(0)
     for alpha, a, d, theta in rng.normal(0, 1, (10, 4)):
         ref = _rx(alpha) @ _tr(a, 0, 0) @ _rz(theta) @ _tr(0, 0, d)

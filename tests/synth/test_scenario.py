@@ -25,9 +25,9 @@ def test_every_shipped_scenario_parses():
         assert s.duration_s == 60.0 and s.joints, f
 
 
-def test_pa10_joint2_carries_seed000_table1():
+def test_pa10_joint2_carries_lightcap_banks_table1():
     j = load_scenario(DATASETS / "pa10_joint2.toml").joint("j2")
-    # seed 000 Table I, joint 2 means
+    # Lightcap and Banks (2007), Table I, joint 2 means
     assert (j.I, j.J, j.mglx, j.mgly, j.b) == (6.15, 12.57, 111.64, -7.80, 23.28)
     assert j.friction == {"model": "coulomb_viscous", "c": 9.28, "v": 18.38} and j.spring == {"model": "linear", "k": 1.19e4}
     s = load_scenario(DATASETS / "pa10_joint2.toml")
@@ -71,7 +71,7 @@ def test_effects_change_the_true_model_only():
     assert joint_models(s)["j2"].drivetrain.torque_gain == 1.05 and joint_models(s, False)["j2"].drivetrain.torque_gain == 1.0
 
 
-def test_reference_is_seed000_eq9_with_a_smooth_start():
+def test_reference_is_lightcap_banks_eq9_with_a_smooth_start():
     ref = {"f0_hz": 0.1, "q0_rad": 0.3, "amplitudes_rad": [0.3, 0.1], "phases_rad": [0.5, 1.0], "ramp_s": 2.0}
     fn = reference_trajectory(ref)
     q, qd = fn(np.array([0.0, 5.0]))

@@ -44,5 +44,5 @@ def test_masses_and_gravity():
             moment += np.cross(c_world - origin, m * np.array([0.0, 0.0, -9.81]))
         tau = pin.computeGeneralizedGravity(model, data, np.array([q2]))[0]
         assert tau == pytest.approx(-axis @ moment, rel=1e-9, abs=1e-9)
-    # arm tilted forward: gravity pulls it further (seed 000 eq. 4: G = -mglx sin q, mglx > 0)
+    # arm tilted forward: gravity pulls it further (Lightcap and Banks (2007), eq. 4: G = -mglx sin q, mglx > 0)
     assert pin.computeGeneralizedGravity(model, data, np.array([0.5]))[0] < -10.0
