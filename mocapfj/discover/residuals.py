@@ -91,7 +91,7 @@ class Families:
 
 def _link_torque(model: JointModel, q, qd, qdd) -> np.ndarray:
     """I q'' + G(q) + F(q, q') - tau_pos(q), N m (docs/conventions.md signs)."""
-    tau = model.I * qdd - model.mglx * np.sin(q) + model.mgly * np.cos(q) + model.friction.torque(qd, q)
+    tau = model.I * qdd + model.single_joint().gravity(q) + model.friction.torque(qd, q)
     if model.position_torque is not None:
         tau = tau - model.position_torque.torque(q)
     return tau

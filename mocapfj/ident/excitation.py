@@ -32,6 +32,7 @@ import numpy as np
 from scipy.optimize import minimize
 
 from ..errors import InputError
+from .equations import link_torque
 from .twostep import step1_regressor
 
 __all__ = ["ExcitationDesign", "design_excitation", "reference_condition", "reference_motion",
@@ -160,8 +161,7 @@ class _Problem:
         p = self.p
         q, qd, qdd = q_m, qd_m, qdd_m
         for _ in range(2):
-            tau = (p["I"] * qdd - p["mglx"] * np.sin(q) + p["mgly"] * np.cos(q) + p["v"] * qd
-                   + p["c"] * np.tanh(qd / self.eps))
+            tau = link_torque(p, q, qd, qdd, sgn=np.tanh(qd / self.eps))
             delta = tau / p["k"]
             dd, ddd = self._d(delta)
             q, qd, qdd = q_m - delta, qd_m - dd, qdd_m - ddd

@@ -42,13 +42,12 @@ from ..errors import InputError
 from ..types import LSResult
 from .conditioning import (check_signals, complementary, decimate_parallel, derivatives, lowpass, noise_gain,
                            white_noise_sd)
+from .equations import LINK_NAMES, MOTOR_NAMES, link_regressor, motor_regressor
 from .ls import ls_fit
 
 __all__ = ["MOTOR_NAMES", "LINK_NAMES", "MotorFirstResult", "MotorStage", "motor_stage", "identify_motor_first",
            "white_noise_sd"]
 
-MOTOR_NAMES = ("J", "b", "k", "tau0")
-LINK_NAMES = ("I", "mglx", "mgly", "c", "v")
 
 
 @dataclass(frozen=True, eq=False)
@@ -125,7 +124,7 @@ def motor_stage(t, q, q_m, u, *, fs_hz: float, cutoff_hz: float = 5.0, link_cuto
     qmf, delta = lowpass(q_m, fs_hz, cutoff_hz), lowpass(q_m - q, fs_hz, cutoff_hz)
     qmd, qmdd = derivatives(qmf, fs_hz)
     f_spring = delta if spring is None else spring(delta + q_zero_rad, t)
-    Wm_full = np.column_stack([qmdd, qmd, f_spring, np.ones_like(delta)])
+    Wm_full = motor_regressor(qmd, qmdd, f_spring)
     u_c = lowpass(u, fs_hz, cutoff_hz)
     Wm, ym = decimate_parallel(Wm_full[inner], u_c[inner], decimate, fs_hz, min(cutoff_hz, 0.8 * fs_hz / (2 * decimate)))
     motor = ls_fit(Wm, ym, MOTOR_NAMES)
@@ -226,7 +225,7 @@ def identify_motor_first(t, q, q_m, u, *, fs_hz: float, cutoff_hz: float = 5.0, 
     qh, tau_s, inner = st.q_hat, st.tau_s, st.inner
     qd, qdd = derivatives(qh, fs_hz)
     # the Coulomb step gets the low-pass that tau_s (from filtered u) already had
-    Wl = np.column_stack([qdd, -np.sin(qh), np.cos(qh), lowpass(np.sign(qd), fs_hz, link_cutoff_hz), qd])
+    Wl = link_regressor(qh, qd, qdd, sgn=lowpass(np.sign(qd), fs_hz, link_cutoff_hz))
     keep = inner & (np.abs(qd) > sign_eps)
     link = ls_fit(Wl[keep], tau_s[keep], LINK_NAMES)
     return MotorFirstResult(motor=st.motor, link=link, q_zero_rad=st.q_zero_rad, t=st.t[inner], tau_s=tau_s[inner],

@@ -43,6 +43,7 @@ import numpy as np
 from ..errors import InputError
 from ..types import LSResult
 from .conditioning import check_signals, lowpass
+from .equations import link_regressor
 from .ls import ls_fit
 
 __all__ = ["STEP1_NAMES", "SPRING_NAMES", "ONE_STEP_NAMES", "TwoStepResult", "step1_regressor",
@@ -96,9 +97,9 @@ def step1_regressor(q, qd, qdd, qd_m, qdd_m, sgn=None) -> np.ndarray:
     """Observation matrix (T, 7) of eq. (6), columns (q'', -sin q, cos q, sign q', q', q_m'', q_m').
 
     All inputs (T,) in rad, rad/s, rad/s^2; `sgn` (T,) replaces sign(q') when given (e.g. tanh).
+    The link equation's columns come from :func:`.equations.link_regressor`.
     """
-    s = np.sign(qd) if sgn is None else sgn
-    return np.column_stack([qdd, -np.sin(q), np.cos(q), s, qd, qdd_m, qd_m])
+    return np.column_stack([link_regressor(q, qd, qdd, sgn), qdd_m, qd_m])
 
 
 def one_step_regressor(W1: np.ndarray, delta: np.ndarray, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

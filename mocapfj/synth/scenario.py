@@ -33,6 +33,7 @@ from ..dynamics import (Backlash, Drivetrain, GravityBalancer, PositionDependent
                         element_from_table)
 from ..dynamics.spec import FRICTION_MODELS, SPRING_MODELS
 from ..errors import InputError
+from ..validate import check_scalar
 from ..io.tomlio import check_format, read_toml, require
 
 __all__ = ["EFFECTS", "Scenario", "ScenarioJoint", "Measurement", "Effect", "load_scenario", "joint_models",
@@ -145,9 +146,7 @@ def _num(path, tab, key, where, default=None, positive=False):
     v = float(v)
     if v != v and default is not None and default != default:  # NaN default: "not used by this model"
         return v
-    if not np.isfinite(v) or (positive and not v > 0):
-        raise InputError(path, f"{where}.{key}", "a positive number" if positive else "a finite number", v)
-    return v
+    return check_scalar(v, f"{where}.{key}" if where else key, positive=positive, file=path)
 
 
 def _floats(path, tab, key, where, n=None):
