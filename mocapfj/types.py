@@ -619,6 +619,14 @@ class JointSignals:
         Link-angle samples filled by interpolation across short gaps.
     name : str
         The joint.
+    filled : (T,) bool or None
+        True where the link angle was filled (not measured); None when none was (or unknown).
+        Output-error identification leaves these samples out of the mocap comparison.
+    t_c, q_m_c, u_c : (T_c,) float or None
+        The controller's own samples over the same span, uniform at `fs_c_hz` (s on the same
+        clock, rad, N m, link side), unfiltered: output-error identification compares the torque
+        at this rate. None when only the mocap-clock signals are known.
+    fs_c_hz : float or None
     """
 
     t: np.ndarray
@@ -628,6 +636,11 @@ class JointSignals:
     fs_hz: float
     n_filled: int = 0
     name: str = ""
+    filled: np.ndarray | None = None
+    t_c: np.ndarray | None = None
+    q_m_c: np.ndarray | None = None
+    u_c: np.ndarray | None = None
+    fs_c_hz: float | None = None
 
     def __post_init__(self) -> None:
         dims = {}
@@ -636,11 +649,45 @@ class JointSignals:
                                                               ("T",), dims=dims, finite=True)))
         object.__setattr__(self, "fs_hz", check_scalar(self.fs_hz, "fs_hz", positive=True))
         object.__setattr__(self, "n_filled", check_int(self.n_filled, "n_filled", lo=0))
+        if self.filled is not None:
+            f = np.asarray(self.filled)
+            if f.shape != self.t.shape or f.dtype != bool:
+                raise InputError(None, f"{self.name or 'signals'}: filled", f"a (T,) = {self.t.shape} bool array",
+                                 f"{f.shape} {f.dtype}")
+            object.__setattr__(self, "filled", freeze(f.copy()))
+        given = [x is not None for x in (self.t_c, self.q_m_c, self.u_c, self.fs_c_hz)]
+        if any(given) and not all(given):
+            raise InputError(None, f"{self.name or 'signals'}: t_c, q_m_c, u_c, fs_c_hz", "all four or none",
+                             f"{sum(given)} of 4")
+        if all(given):
+            cdims = {}
+            for name in ("t_c", "q_m_c", "u_c"):
+                object.__setattr__(self, name, freeze(check_array(getattr(self, name), f"{self.name or 'signals'}: {name}",
+                                                                  ("T_c",), dims=cdims, finite=True)))
+            object.__setattr__(self, "fs_c_hz", check_scalar(self.fs_c_hz, "fs_c_hz", positive=True))
+
+    @property
+    def has_controller_rate(self) -> bool:
+        """True when the controller's own samples are attached (t_c, q_m_c, u_c)."""
+        return self.t_c is not None
 
     @property
     def n_samples(self) -> int:
         return int(self.t.size)
 
+    @property
+    def measured(self) -> np.ndarray:
+        """(T,) bool: True where the link angle was measured (not filled)."""
+        return np.ones(self.t.size, bool) if self.filled is None else ~self.filled
+
     def head(self, n: int) -> "JointSignals":
         """The first `n` samples."""
-        return JointSignals(self.t[:n], self.q[:n], self.q_m[:n], self.u[:n], self.fs_hz, self.n_filled, self.name)
+        if n >= self.t.size:
+            return self
+        ctrl = {}
+        if self.t_c is not None:
+            keep = self.t_c <= self.t[n - 1] + 1.0 / self.fs_c_hz
+            ctrl = dict(t_c=self.t_c[keep], q_m_c=self.q_m_c[keep], u_c=self.u_c[keep], fs_c_hz=self.fs_c_hz)
+        return JointSignals(self.t[:n], self.q[:n], self.q_m[:n], self.u[:n], self.fs_hz,
+                            int(self.n_filled if self.filled is None else self.filled[:n].sum()), self.name,
+                            None if self.filled is None else self.filled[:n], **ctrl)

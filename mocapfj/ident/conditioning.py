@@ -11,8 +11,8 @@ from scipy import signal
 from ..errors import InputError
 from ..types import ControllerLog, Deflection, JointSignals
 
-__all__ = ["lowpass", "derivatives", "decimate_parallel", "resample_to", "complementary", "white_noise_sd",
-           "noise_gain", "controller_on", "check_signals", "joint_signals"]
+__all__ = ["lowpass", "derivatives", "decimate_parallel", "resample_to", "complementary", "white_noise_sd", "noise_floor_sd",
+           "noise_gain", "controller_on", "controller_span", "check_signals", "joint_signals"]
 
 
 def _check_rate(fs_hz: float, cutoff_hz: float, what: str) -> None:
@@ -95,6 +95,19 @@ def white_noise_sd(x: np.ndarray, fs_hz: float) -> float:
     P = np.abs(np.fft.rfft(x - x.mean())) ** 2 / x.size
     band = (f > fs_hz / 4) & (f < 0.98 * fs_hz / 2)
     return float(np.sqrt(P[band].mean())) if band.any() else 0.0
+
+
+def noise_floor_sd(x: np.ndarray, fs_hz: float, above: float = 0.25) -> float:
+    """SD of the white noise on x (T,), from the median of its Welch spectrum (Hann windows of 2 s,
+    so the leakage of a large slow motion stays far below a quantisation-level floor) above
+    `above` x fs: a robust floor where the motion has no power. 0 when there is no such band."""
+    from scipy.signal import welch
+
+    x = np.asarray(x, dtype=np.float64)
+    nper = int(min(x.size, max(64, 2 * fs_hz)))
+    f, P = welch(x, fs=fs_hz, nperseg=nper)
+    band = f > above * fs_hz
+    return float(np.sqrt(np.median(P[band]) * fs_hz / 2)) if band.any() else 0.0
 
 
 def noise_gain(fs_hz: float, *cutoffs_hz: float) -> float:
@@ -182,4 +195,22 @@ def joint_signals(d: Deflection, controller: ControllerLog, joint: str, *, min_v
     u = controller_on(t, controller.t, controller.tau[:, j], controller.rate_hz, cutoff)
     g = np.isfinite(q_m) & np.isfinite(u)
     fs = 1.0 / float(np.median(np.diff(t)))
-    return JointSignals(t=t[g], q=q[g], q_m=q_m[g], u=u[g], fs_hz=fs, n_filled=int((~ok).sum()), name=joint)
+    ctrl = controller_span(controller, j, t[g][0], t[g][-1])
+    return JointSignals(t=t[g], q=q[g], q_m=q_m[g], u=u[g], fs_hz=fs, n_filled=int((~ok[g]).sum()), name=joint,
+                        filled=~ok[g], **ctrl)
+
+
+def controller_span(controller: ControllerLog, j: int, t0: float, t1: float) -> dict:
+    """The controller's own samples of joint index `j` covering [t0, t1] (one sample beyond each
+    end where the log has it), on a uniform time base: {t_c, q_m_c, u_c, fs_c_hz}. Time stamps
+    within 1e-3 of a step of the uniform grid are taken as they are; a jittered log is
+    interpolated onto its median step."""
+    t = controller.t
+    i0 = max(int(np.searchsorted(t, t0, side="right")) - 1, 0)
+    i1 = min(int(np.searchsorted(t, t1, side="left")) + 1, t.size)
+    tc, qm, u = t[i0:i1], controller.q_m[i0:i1, j], controller.tau[i0:i1, j]
+    dt = float(np.median(np.diff(tc)))
+    grid = tc[0] + dt * np.arange(int(round((tc[-1] - tc[0]) / dt)) + 1)
+    if grid.size != tc.size or np.max(np.abs(grid - tc)) > 1e-3 * dt:
+        qm, u = np.interp(grid, tc, qm), np.interp(grid, tc, u)
+    return {"t_c": grid, "q_m_c": qm, "u_c": u, "fs_c_hz": 1.0 / dt}

@@ -3,6 +3,9 @@ spring model selected, and the result as an :class:`~.result.IdentifiedJoint`.
 
 Methods (docs/identification.md):
 
+- ``"output_error"``: the link simulated on the recorded motor motion and compared with the mocap
+  angle and the motor torque (:mod:`.output_error`); each parameter judged determined or not
+  (:mod:`.determinacy`).
 - ``"motor_first"``: the motor equation first, then the link equation on a rebuilt link angle
   (:mod:`.motorfirst`).
 - ``"two_step"``: Lightcap and Banks (2007) §II.A, eq. (5)-(7) (:mod:`.twostep`).
@@ -14,16 +17,18 @@ Lightcap and Banks' two-step and one-step formulations always run too: their con
 from __future__ import annotations
 
 
+import numpy as np
+
 from ..dynamics import CoulombViscous, JointModel, LinearSpring
 from ..errors import InputError
 from ..types import JointSignals
-from .conditioning import lowpass
+from .conditioning import derivatives, lowpass, white_noise_sd
 from .result import PARAMETER_NAMES, IdentifiedJoint, Parameter, SpringResult
 from .springs import HYSTERETIC, SPRING_FITTERS, bouc_wen_states, select_spring_model
 
 __all__ = ["IDENTIFY_METHODS", "identify_joint", "identify_signals", "spring_pairs"]
 
-IDENTIFY_METHODS = ("motor_first", "two_step")
+IDENTIFY_METHODS = ("output_error", "motor_first", "two_step")
 
 
 def spring_pairs(delta, tau_s, t, fs_hz: float, cutoff_hz: float = 10.0, rate_hz: float = 50.0):
@@ -54,19 +59,19 @@ def _hysteretic_spring(h: dict, delta, tau_s, t, fs_hz: float) -> SpringResult:
                         motor_rms_gain_pct=h["rms_gain_pct"])
 
 
-def _model(name: str, gear_ratio: float, p: dict, spring: SpringResult) -> JointModel:
+def _model(name: str, gear_ratio: float, p: dict, spring: SpringResult, smoothing: float = 0.0) -> JointModel:
     """The identified JointModel: the chosen spring when it is an element the simulator runs,
     else the linear spring of the same stiffness."""
     element = spring.element if spring.element is not None else LinearSpring(k=p["k"])
     if spring.model == "linear":
         element = LinearSpring(k=p["k"])
     return JointModel(name=name or "joint", gear_ratio=gear_ratio, I=p["I"], J=p["J"], mglx=p["mglx"], mgly=p["mgly"],
-                      b=p["b"], friction=CoulombViscous(c=p["c"], v=p["v"]), spring=element)
+                      b=p["b"], friction=CoulombViscous(c=p["c"], v=p["v"], smoothing=smoothing), spring=element)
 
 
 def identify_joint(t, q, q_m, u, *, fs_hz: float, method: str = "motor_first", cutoff_hz: float | None = None,
                    decimate: int = 2, spring_models=None, name: str = "", gear_ratio: float = 1.0,
-                   frames_filled: int = 0, recording: str = "") -> IdentifiedJoint:
+                   frames_filled: int = 0, recording: str = "", measured=None, controller=None) -> IdentifiedJoint:
     """Identify one joint from its signals on one clock (docs/identification.md).
 
     Parameters
@@ -84,12 +89,17 @@ def identify_joint(t, q, q_m, u, *, fs_hz: float, method: str = "motor_first", c
     spring_models : sequence of str, optional
         Spring models to select among (:data:`.springs.SPRING_FITTERS`; default all).
     name, gear_ratio, frames_filled, recording : carried into the result.
+    measured : (T,) bool, optional
+        True where q was measured, False where a gap was filled (output error leaves those out).
+    controller : (t_c, q_m_c, u_c, fs_c_hz), optional
+        The controller's own samples over the same span (output error compares the torque there).
     """
     from .motorfirst import identify_motor_first
     from .twostep import identify_two_step
 
     if method not in IDENTIFY_METHODS:
         raise InputError(None, "method", f"one of {list(IDENTIFY_METHODS)}", repr(method))
+    extra, smoothing = {}, 0.0
     two = identify_two_step(t, q, q_m, u, fs_hz=fs_hz, cutoff_hz=10.0 if cutoff_hz is None else cutoff_hz,
                             decimate=decimate)
     cond = {"cond_two_step": two.cond_two_step, "cond_one_step": two.cond_one_step}
@@ -97,7 +107,34 @@ def identify_joint(t, q, q_m, u, *, fs_hz: float, method: str = "motor_first", c
     unknown = [m for m in models if m not in SPRING_FITTERS]
     if unknown:
         raise InputError(None, "spring_models", f"names from {sorted(SPRING_FITTERS)}", unknown)
-    if method == "two_step":
+    if method == "output_error":
+        from .determinacy import combinations, judge_parameters
+        from .output_error import identify_output_error
+
+        oe = identify_output_error(t, q, q_m, u, fs_hz=fs_hz, measured=measured, controller=controller)
+        f = oe.fit
+        qd, qdd = derivatives(lowpass(np.asarray(q_m, float), fs_hz, min(oe.band_hz, 0.4 * fs_hz)), fs_hz)
+        context = {"sigma_q_rad": white_noise_sd(np.asarray(q, float), fs_hz), "band_hz": oe.band_hz,
+                   "deflection_viscous_rad": float(np.std(f["v"] * qd) / f["k"]),
+                   "deflection_inertial_rad": float(np.std(f["I"] * qdd) / f["k"])}
+        values = judge_parameters(f.names, f.values, f.std, f.cov, duration_s=float(t[-1] - t[0]), context=context,
+                                  at_bound=oe.at_bound)
+        sel = select_spring_model(*spring_pairs(oe.delta_mocap, oe.tau_s_motor, oe.t, fs_hz,
+                                                cutoff_hz=min(10.0, oe.band_hz)),
+                                  models=tuple(m for m in models if m not in HYSTERETIC))
+        spring = _selected(sel)
+        if spring.model == "linear":             # the pairs carry the mocap noise: k is the fit's
+            spring = SpringResult(model="linear", params={"k": f["k"], "tau0": f["k"] * f["z"]},
+                                  element=LinearSpring(k=f["k"]), r2=spring.r2, holdout_rms_Nm=spring.holdout_rms_Nm)
+        stages = {"output_error": f}
+        cond["cond_output_error"] = f.cond
+        torque_rms, q_zero = f.residual_rms, f["z"]
+        extra = {"combinations": {k: {"value": v, "std": sd} for k, (v, sd) in
+                                  combinations(f.names, f.values, f.cov).items()},
+                 "friction_law": {"law": "tanh" if oe.friction_scale > 0 else "sign", "eps_rad_s": oe.friction_scale},
+                 "band_hz": oe.band_hz, "residual_sd": {"q_rad": oe.sigma_q, "u_Nm": oe.sigma_u}}
+        smoothing = oe.friction_scale
+    elif method == "two_step":
         values = {n: Parameter(n, two.step1[n], two.step1.std_of(n)) for n in PARAMETER_NAMES if n != "k"}
         values["k"] = Parameter("k", two.spring["k"], two.spring.std_of("k"))
         spring = _selected(select_spring_model(two.delta, two.tau_s, two.t, models=models))
@@ -127,15 +164,17 @@ def identify_joint(t, q, q_m, u, *, fs_hz: float, method: str = "motor_first", c
         cond.update(cond_motor=mf.motor.cond, cond_link=mf.link.cond)
         torque_rms, q_zero = mf.motor.residual_rms, mf.q_zero_rad
     p = {n: v.value for n, v in values.items()}
-    return IdentifiedJoint(name=name, method=method, params=values, model=_model(name, gear_ratio, p, spring),
+    return IdentifiedJoint(name=name, method=method, params=values, model=_model(name, gear_ratio, p, spring, smoothing),
                            spring=spring, stages=stages, cond=cond, torque_rms=float(torque_rms),
                            q_zero_rad=float(q_zero), k_one_step=float(two.one_step["k"]),
-                           frames_filled=int(frames_filled), recording=recording)
+                           frames_filled=int(frames_filled), recording=recording, extra=extra)
 
 
 def identify_signals(signals: JointSignals, *, gear_ratio: float = 1.0, recording: str = "", **kw) -> IdentifiedJoint:
     """:func:`identify_joint` on a :class:`~mocapfj.types.JointSignals` (the joints stage's output)."""
+    ctrl = ((signals.t_c, signals.q_m_c, signals.u_c, signals.fs_c_hz) if signals.has_controller_rate else None)
     return identify_joint(signals.t, signals.q, signals.q_m, signals.u, fs_hz=signals.fs_hz, name=signals.name,
-                          gear_ratio=gear_ratio, frames_filled=signals.n_filled, recording=recording, **kw)
+                          gear_ratio=gear_ratio, frames_filled=signals.n_filled, recording=recording,
+                          measured=signals.measured, controller=ctrl, **kw)
 
 

@@ -25,7 +25,8 @@ from scipy.linalg import qr
 from ..errors import InputError
 from ..types import LSResult
 
-__all__ = ["ls_fit", "unidentifiable_columns", "cv_pct", "hac_lags", "ZERO_COLUMN_RTOL", "MAX_SCALED_COND"]
+__all__ = ["ls_fit", "unidentifiable_columns", "cv_pct", "hac_lags", "sandwich_cov", "ZERO_COLUMN_RTOL",
+           "MAX_SCALED_COND"]
 
 ZERO_COLUMN_RTOL = 1e-10
 """A column whose norm is below this fraction of the largest column norm is zero (rounding: a URDF
@@ -78,6 +79,36 @@ def _hac_meat(G: np.ndarray, lags: int) -> np.ndarray:
         C = G[lag:].T @ G[:-lag]
         S += w * (C + C.T)
     return S
+
+
+def sandwich_cov(J: np.ndarray, r: np.ndarray, time_index: np.ndarray | None = None,
+                 lags: int | None = None) -> np.ndarray:
+    """Newey-West covariance (J^T J)^-1 S (J^T J)^-1 of a least-squares solution.
+
+    J (r, p): the Jacobian of the residuals r (r,) at the solution (for linear LS, the
+    observation matrix); rows may stack several equations per time sample, `time_index` (r,)
+    giving each row's sample (scores are summed per sample before their autocovariances are
+    taken). `lags`: the Bartlett bandwidth in samples, default from the summed residual
+    (:func:`hac_lags`). With r - p degrees of freedom (the small-sample factor r / (r - p)).
+    """
+    J = np.asarray(J, dtype=np.float64)
+    r = np.asarray(r, dtype=np.float64)
+    n, p = J.shape
+    G = J * r[:, None]
+    if time_index is not None:
+        _, inverse = np.unique(np.asarray(time_index), return_inverse=True)
+        Gt = np.zeros((inverse.max() + 1, p))
+        np.add.at(Gt, inverse, G)
+        rt = np.bincount(inverse, weights=r)
+        G = Gt
+    else:
+        rt = r
+    scale = np.linalg.norm(J, axis=0)
+    scale[scale == 0] = 1.0
+    Js = J / scale
+    inv_s = np.linalg.inv(Js.T @ Js)
+    S = _hac_meat(G / scale, hac_lags(rt) if lags is None else int(lags)) * n / max(n - p, 1)
+    return (inv_s @ S @ inv_s) / np.outer(scale, scale)
 
 
 def ls_fit(W: np.ndarray, y: np.ndarray, names: Sequence[str], weights: np.ndarray | None = None, *,
@@ -147,22 +178,10 @@ def ls_fit(W: np.ndarray, y: np.ndarray, names: Sequence[str], weights: np.ndarr
     res = y - W @ x
     rss = float(res @ res)
     sigma2 = rss / (r - p)
-    inv_s = np.linalg.inv(Ws.T @ Ws)
     if cov == "classic":
-        C = sigma2 * inv_s
+        C = sigma2 * np.linalg.inv(Ws.T @ Ws) / np.outer(scale, scale)
     else:
-        G = Ws * res[:, None]
-        if time_index is not None:
-            _, inverse = np.unique(time_index, return_inverse=True)
-            Gt = np.zeros((inverse.max() + 1, p))
-            np.add.at(Gt, inverse, G)
-            rt = np.bincount(inverse, weights=res)
-            G = Gt
-        else:
-            rt = res
-        S = _hac_meat(G, hac_lags(rt)) * r / (r - p)
-        C = inv_s @ S @ inv_s
-    C = C / np.outer(scale, scale)
+        C = sandwich_cov(W, res, time_index)
     std = np.sqrt(np.diag(C))
     with np.errstate(divide="ignore", invalid="ignore"):
         rel = np.where(x != 0, 100.0 * std / np.abs(x), np.nan)

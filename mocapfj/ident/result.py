@@ -214,6 +214,8 @@ class JointSummary:
                    frames_filled=int(sum(t.frames_filled for t in self.trials)))
         if self.cv_pct is not None:
             out["cv_pct"] = self.cv_pct
+        elif first.extra:
+            out.update({k: v for k, v in first.extra.items() if k not in out})
         not_determined = {n: p.reason for n, p in self.params.items() if not p.determined}
         if not_determined:
             out["not_determined"] = not_determined

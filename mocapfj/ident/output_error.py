@@ -1,0 +1,599 @@
+"""Output-error identification of one flexible joint: the link simulated on the recorded motor
+motion and compared with both measured outputs, the mocap link angle and the motor torque.
+
+Why. Every equation-error method has to put a measured link acceleration into a regressor: from
+mocap (noise amplified twice by differentiation), or rebuilt from the motor-side spring torque
+(which carries the torque noise into the inertia column, where it meets the same noise in the
+output: an errors-in-variables bias that grows as the excitation slows and the torque gets
+noisier, -18 % to -77 % on the link inertia in independent trials). Here no measured signal is
+differentiated except the motor angle. This is the output-error idea of DIDIM (Gautier, Janot and
+Vandanjon 2013) for a flexible joint: the motor angle is prescribed (its position loop is stiff),
+the link is simulated, and the simulation is compared with what was measured. The Jacobian is the
+link's sensitivity to its parameters along the simulated motion: the instruments of IDIM-IV
+(Janot, Vandanjon and Gautier 2014), noise-free because they come from the simulation.
+
+The model (Lightcap and Banks 2007, eq. 4; signs docs/conventions.md):
+
+    I q'' + v q' + c s(q') + G(q) = k (q_m - q)             (link, simulated: q_sim)
+    u = J q_m'' + b q_m' + k (q_m - q_sim)                    (motor torque)
+    q_mocap = q_sim + z                                       (the mocap angle's zero z)
+
+G(q) = -mglx sin q + mgly cos q; s the Coulomb law: sign(q') with sticking, or tanh(q' / eps),
+eps fitted (from the best of a few starting values, :data:`FRICTION_SCALES`) when it fits better than the
+neighbours. The link is integrated at the controller's rate by
+:func:`mocapfj.dynamics.link_response` (second order, friction included) and taken at the mocap
+instants by cubic Hermite interpolation.
+
+Where the information is. The link and motor inertias are told apart by the joint's dynamics:
+the torque's response to the motor's motion up to and around the resonances of the motor loop,
+and the link's inertial deflection I q'' / k in the mocap angle. On a light joint the first
+carries nearly all of it (comparing the torque only within three times the excitation band
+raises the Cramer-Rao bound of I from 0.9 % to 7.8 % on one grid case), so the torque is compared
+at the controller's rate, up to `band_hz` (default 0.4 x its rate, at most 60 Hz, decimated to
+2.5 samples per period of the band), with a noise model instead of a narrow band: each output's
+residual is whitened by an autoregressive filter fitted to it (Burg's method, order by AIC; the
+torque's noise is white, coloured or quantised, and the motor angle's noise, differentiated twice
+in J q_m'', rises as f^4), i.e. generalised least squares iterated to the fit. The mocap angle is
+compared at every measured sample (gap-filled samples are left out).
+
+The parameters minimise the whitened residuals' sum of squares (scipy's trust-region reflective
+least squares; bounds I, J, k > 0 and c, v, b >= 0). The Jacobian of the simulation is by forward
+differences of the kernel (six simulations of a few milliseconds each).
+
+Uncertainty. Two covariances of the same estimate: the model's, (J^T J)^-1 of the whitened
+Jacobian, and a sandwich with a Newey-West meat over time (:func:`.ls.sandwich_cov`: whatever
+correlation or model error the whitened residuals still show). Each parameter's reported SD is the
+larger of the two.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.signal import lfilter
+
+from ..dynamics.link_response import link_response
+from ..errors import InputError
+from ..types import LSResult
+from .conditioning import check_signals, derivatives, lowpass
+from .ls import sandwich_cov
+
+__all__ = ["OE_NAMES", "FRICTION_SCALES", "OutputErrorResult", "identify_output_error",
+           "excitation_bandwidth_hz", "burg_ar", "eiv_band_hz",
+           "encoder_band_hz"]
+
+OE_NAMES = ("I", "mglx", "mgly", "c", "v", "J", "b", "k", "z", "eps")
+_LINK = ("I", "mglx", "mgly", "c", "v", "k")
+_IDX = {n: i for i, n in enumerate(OE_NAMES)}
+LINK_BAND_FRACTION = 0.6
+"""The comparison band's upper limit as a fraction of the link's resonance sqrt(k / I) / 2 pi."""
+
+import os
+_DEBUG = bool(os.environ.get("MOCAPFJ_OE_DEBUG"))
+FRICTION_SCALES = (0.003, 0.01, 0.03, 0.1)
+"""Starting points of the tanh law's eps, as fractions of the motor velocity's RMS (each fitted
+briefly, the best refined)."""
+EPS_RANGE_RAD_S = (1e-4, 1.0)
+"""Bounds of eps, rad/s."""
+
+
+@dataclass(frozen=True, eq=False)
+class OutputErrorResult:
+    """Result of :func:`identify_output_error`.
+
+    fit : LSResult of OE_NAMES (kg m^2, N m, N m, N m, N m s, kg m^2, N m s, N m/rad, rad); `cov`
+        and `std` are the reported ones (per parameter the larger of the model's and the
+        sandwich's; NaN for a parameter held at a bound); `residual_rms` is the torque
+        residual's in its band, N m.
+    cov_model, cov_sandwich : (9, 9) the two covariances (module docstring).
+    at_bound : names of parameters held at a bound (c, v or b at 0): the data push them below.
+    friction_scale : eps of the Coulomb law chosen (0: sign with sticking), rad/s.
+    band_hz : the torque comparison band, Hz.
+    sigma_q, sigma_u : the residuals' SDs: mocap angle (rad, per sample) and torque (N m, in band).
+    ar_q, ar_u : the whitening filters' coefficients (1, a_1, ..., a_p) of the two residuals.
+    t, delta_sim, tau_s, delta_mocap, tau_s_motor : on the mocap samples inside the trims: times
+        (s), the simulated deflection (rad), the spring torque k delta_sim (N m), the measured
+        deflection q_m - (q_mocap - z) and u - J q_m'' - b q_m' (the motor side's spring torque,
+        N m), both low-passed at 10 Hz, for the spring model.
+    scores : {eps: whitened cost} of every Coulomb law tried.
+    n_iter : least-squares evaluations in all.
+    """
+
+    fit: LSResult
+    cov_model: np.ndarray
+    cov_sandwich: np.ndarray
+    at_bound: tuple[str, ...]
+    friction_scale: float
+    band_hz: float
+    sigma_q: float
+    sigma_u: float
+    ar_q: np.ndarray
+    ar_u: np.ndarray
+    t: np.ndarray
+    delta_sim: np.ndarray
+    tau_s: np.ndarray
+    delta_mocap: np.ndarray
+    tau_s_motor: np.ndarray
+    scores: dict
+    n_iter: int
+
+    def __getitem__(self, name: str) -> float:
+        return self.fit[name]
+
+
+def excitation_bandwidth_hz(q_m: np.ndarray, fs_hz: float, share: float = 0.99) -> float:
+    """Frequency below which `share` of the motor velocity's power lies, Hz (the excitation's
+    bandwidth; the velocity weights the trajectory's harmonics as the inertia column does)."""
+    qd = np.gradient(np.asarray(q_m, dtype=np.float64)) * fs_hz
+    P = np.abs(np.fft.rfft(qd - qd.mean())) ** 2
+    f = np.fft.rfftfreq(qd.size, 1.0 / fs_hz)
+    c = np.cumsum(P)
+    return float(f[min(int(np.searchsorted(c, share * c[-1])), f.size - 1)])
+
+
+def burg_ar(x: np.ndarray, max_order: int) -> tuple[np.ndarray, float]:
+    """An autoregressive model of x (n,) by Burg's method, its order chosen by AIC up to
+    `max_order`: (a (p + 1,) with a[0] = 1, the innovation variance). lfilter(a, 1, x) whitens x."""
+    x = np.asarray(x, dtype=np.float64) - np.mean(x)
+    n = x.size
+    f, b = x[1:].copy(), x[:-1].copy()
+    a = np.array([1.0])
+    E = float(x @ x) / n
+    best = (n * math.log(max(E, 1e-300)), a.copy(), E)
+    for m in range(1, max_order + 1):
+        den = float(f @ f + b @ b)
+        if den <= 0:
+            break
+        k = -2.0 * float(b @ f) / den
+        a = np.concatenate([a, [0.0]])
+        a = a + k * a[::-1]
+        E *= 1.0 - k * k
+        aic = n * math.log(max(E, 1e-300)) + 2 * m
+        if aic < best[0]:
+            best = (aic, a.copy(), E)
+        f, b = f[1:] + k * b[1:], b[:-1] + k * f[:-1]
+        if f.size < 2:
+            break
+    return best[1], best[2]
+
+
+class _Data:
+    """The measurements on their own instants: the controller's (t_c uniform at fs_c: q_m, its
+    derivatives, u) and the mocap's (q at t_q, measured mask), and the Hermite weights that take
+    a controller-rate simulation to the mocap instants."""
+
+    def __init__(self, t_c, q_m, u, fs_c, t_q, q, measured, trim_s, band_hz):
+        self.fs = fs_c
+        self.q_m, self.u = q_m, u
+        self.qd_m, self.qdd_m = derivatives(q_m, fs_c)
+        trim = int(round(trim_s * fs_c))
+        self.trim = trim
+        # the torque channel: band-limited and decimated (none when the band is the whole rate)
+        self.band = min(float(band_hz), 0.45 * fs_c)
+        self.stride = max(1, int(fs_c // (2.5 * self.band)))
+        edge = trim + (int(np.ceil(2.0 * fs_c / self.band)) if self.stride > 1 else 0)
+        self.iu = np.arange(edge, t_c.size - edge, self.stride)
+        self.u_b, self.qdd_b, self.qd_b, self.qm_b = (self.band_of(x) for x in (u, self.qdd_m, self.qd_m, q_m))
+        # the mocap channel: samples inside the trims, each between two controller samples; in
+        # the same band as the torque (low-passed and decimated) when that is below its rate
+        pos = (t_q - t_c[0]) * fs_c
+        inside = (pos >= trim) & (pos <= t_c.size - 1 - trim)
+        i = np.minimum(np.floor(pos[inside]).astype(np.int64), t_c.size - 2)
+        s = pos[inside] - i
+        self.i0 = i
+        self.h = np.column_stack([2 * s**3 - 3 * s**2 + 1, (s**3 - 2 * s**2 + s) / fs_c, -2 * s**3 + 3 * s**2,
+                                  (s**3 - s**2) / fs_c])
+        self.fs_q = 1.0 / float(np.median(np.diff(t_q)))
+        self.stride_q = max(1, int(self.fs_q // (2.5 * self.band))) if self.band < 0.4 * self.fs_q else 1
+        edge_q = int(np.ceil(2.0 * self.fs_q / self.band)) if self.stride_q > 1 else 0
+        self.iq = np.arange(edge_q, i.size - edge_q, self.stride_q)
+        self.q = self.q_band(q[inside])
+        filled = ~measured[inside]
+        if self.stride_q > 1:       # a decimated sample is measured unless a gap fills much of its span
+            frac = np.convolve(filled.astype(float), np.ones(self.stride_q) / self.stride_q, mode="same")
+            filled = frac > 0.5
+        self.filled = filled[self.iq]
+        self.t_c = t_c
+
+    def q_band(self, x):
+        """A mocap-instant series (inner samples) in the band, at the kept rows."""
+        if self.stride_q == 1:
+            return np.asarray(x)[self.iq]
+        return lowpass(x, self.fs_q, self.band)[self.iq]
+
+    def band_of(self, x):
+        if self.stride == 1:
+            return np.asarray(x)[self.iu]
+        return lowpass(x, self.fs, self.band)[self.iu]
+
+    def at_mocap(self, q, w):
+        """q (T_c, ...) and w its derivative at the mocap instants (cubic Hermite)."""
+        i = self.i0
+        h = self.h if q.ndim == 1 else self.h[:, :, None]
+        return h[:, 0] * q[i] + h[:, 1] * w[i] + h[:, 2] * q[i + 1] + h[:, 3] * w[i + 1]
+
+
+class _Problem:
+    """The whitened residuals of one joint under one Coulomb law ("sign" or "tanh"), and their
+    Jacobian, as functions of the free parameters (eps is fixed at 0 under the sign law)."""
+
+    def __init__(self, data: _Data, law: str, scale: np.ndarray, noise=None, max_phase: float = 0.05):
+        self.d, self.law, self.scale, self.max_phase = data, law, scale, max_phase
+        self.free = np.ones(len(OE_NAMES), bool)
+        if law == "sign":
+            self.free[_IDX["eps"]] = False
+        self.set_noise(noise or ((np.array([1.0]), 1.0), (np.array([1.0]), 1.0)))
+        self._cache = (None, None)
+        self._x = np.zeros(len(OE_NAMES))
+
+    def set_noise(self, noise):
+        """noise = ((a_q, sd_q), (a_u, sd_u)): the whitening filters and innovation SDs."""
+        (self.a_q, self.s_q), (self.a_u, self.s_u) = noise
+        p = self.a_q.size - 1
+        bad = np.convolve(self.d.filled.astype(float), np.ones(p + 1))[:self.d.filled.size] > 0
+        self.keep_q = ~bad
+        self.keep_q[:p] = False
+
+    def full(self, xf) -> np.ndarray:
+        x = self._x.copy()
+        x[self.free] = xf
+        if self.law == "sign":
+            x[_IDX["eps"]] = 0.0
+        return x
+
+    def _link(self, x, sens=False):
+        p = dict(zip(OE_NAMES, x))
+        return link_response(self.d.q_m, self.d.fs, eps=p["eps"], qd_m=self.d.qd_m, sensitivities=sens,
+                             max_phase=self.max_phase, **{n: p[n] for n in _LINK})
+
+    def simulate(self, x):
+        x = np.asarray(x, dtype=np.float64)
+        key = x.tobytes()
+        if self._cache[0] != key:
+            self._cache = (key, self._link(x))
+        return self._cache[1]
+
+    def raw(self, x):
+        """Unwhitened residuals at the full parameter vector x: mocap angle (rad) and torque
+        (N m), each in the band at its kept rows."""
+        x = np.asarray(x, dtype=np.float64)
+        q_s, w_s = self.simulate(x)
+        r_q = self.d.q - self.d.q_band(self.d.at_mocap(q_s, w_s)) - x[_IDX["z"]]
+        r_u = self.d.u_b - (x[_IDX["J"]] * self.d.qdd_b + x[_IDX["b"]] * self.d.qd_b
+                            + x[_IDX["k"]] * (self.d.qm_b - self.d.band_of(q_s)))
+        return r_q, r_u
+
+    def _white(self, r_q, r_u):
+        wq = lfilter(self.a_q, [1.0], r_q, axis=0)[self.keep_q] / self.s_q
+        wu = lfilter(self.a_u, [1.0], r_u, axis=0)[self.a_u.size - 1:] / self.s_u
+        return wq, wu
+
+    def fun(self, xf):
+        return np.concatenate(self._white(*self.raw(self.full(xf))))
+
+    def jac_full(self, x):
+        """The whitened Jacobian with respect to every parameter (rows as fun's)."""
+        x = np.asarray(x, dtype=np.float64)
+        q_s, w_s, Sq, Sw = self._link(x, sens=True)           # d q_sim / d (link parameters, eps)
+        Sm = self.d.q_band(self.d.at_mocap(Sq, Sw))
+        Sb = self.d.band_of(Sq)
+        k = x[_IDX["k"]]
+        Jq = np.zeros((Sm.shape[0], len(OE_NAMES)))
+        Ju = np.zeros((Sb.shape[0], len(OE_NAMES)))
+        for j, n in enumerate(_LINK + ("eps",)):
+            Jq[:, _IDX[n]] = -Sm[:, j]
+            Ju[:, _IDX[n]] = k * Sb[:, j]
+        Ju[:, _IDX["k"]] -= self.d.qm_b - self.d.band_of(q_s)
+        Ju[:, _IDX["J"]] = -self.d.qdd_b
+        Ju[:, _IDX["b"]] = -self.d.qd_b
+        Jq[:, _IDX["z"]] = -1.0
+        return np.vstack(self._white(Jq, Ju))
+
+    def jac(self, xf):
+        return self.jac_full(self.full(xf))[:, self.free]
+
+    def time_index(self) -> np.ndarray:
+        """Each whitened row's controller sample (for the sandwich's autocovariances)."""
+        iq = self.d.i0[self.d.iq][self.keep_q]
+        iu = self.d.iu[self.a_u.size - 1:]
+        return np.concatenate([iq, iu])
+
+
+def _bounds():
+    lo = np.full(len(OE_NAMES), -np.inf)
+    hi = np.full(len(OE_NAMES), np.inf)
+    for n in ("I", "J", "k"):
+        lo[_IDX[n]] = 0.0
+    for n in ("c", "v", "b"):
+        lo[_IDX[n]] = 0.0
+    lo[_IDX["eps"]], hi[_IDX["eps"]] = EPS_RANGE_RAD_S
+    return lo, hi
+
+
+def _solve(prob: _Problem, x0, max_nfev: int):
+    """Trust-region reflective least squares from x0 (full vector) over the free parameters:
+    (x, cost, evaluations)."""
+    from scipy.optimize import least_squares
+
+    lo, hi = _bounds()
+    x0 = np.array(x0, dtype=np.float64)
+    prob._x = x0.copy()
+    f = prob.free
+    # strictly inside the bounds (I, J, k > 0; a parameter at 0 is started just above it)
+    xf = np.minimum(np.maximum(x0[f], lo[f] + 1e-6 * prob.scale[f]), np.where(np.isfinite(hi[f]), 0.999 * hi[f], np.inf))
+    res = least_squares(prob.fun, xf, jac=prob.jac, bounds=(lo[f], hi[f]), method="trf", x_scale="jac",
+                        ftol=1e-10, xtol=1e-9, gtol=1e-10, max_nfev=max_nfev)
+    return prob.full(res.x), float(res.fun @ res.fun), int(res.nfev)
+
+
+def _initial(q, q_m, u, fs_hz, band_hz, trim):
+    """A consistent start without simulation, linear in both steps, no noisy regressor.
+
+    1. The sum of the two equations with q ~ q_m (the rigid joint; no mocap in it) gives the
+       total inertia A = I + J and damping B = b + v, the Coulomb level c and gravity from the
+       torque: u = A q_m'' + B q_m' + c s(q_m') + G(q_m).
+    2. The link equation solved for the deflection, quasi-statically (q'' ~ q_m''):
+       q_m - q_mocap = (I q_m'' + v q_m' + [c s + G]) / k - z, with [c s + G] from step 1: linear
+       in (I / k, v / k, 1 / k, z), the mocap noise in the output only.
+    J = A - I, b = B - v, each of I, v kept within 5-95 % of its total.
+    """
+    qd, qdd = derivatives(lowpass(q_m, fs_hz, min(0.4 * fs_hz, max(4.0 * band_hz, 20.0))), fs_hz)
+    sl = slice(trim, q.size - trim)
+
+    def lp(x):
+        return lowpass(x, fs_hz, band_hz)[sl]
+
+    sgn = np.tanh(qd / (0.02 * max(float(np.std(qd)), 1e-9)))
+    Ws = lp(np.column_stack([qdd, qd, sgn, -np.sin(q_m), np.cos(q_m)]))
+    ub = lp(u)
+    A, B, c, mglx, mgly = np.linalg.lstsq(Ws, ub, rcond=None)[0]
+    if not A > 0:
+        raise InputError(None, "u, q_m", "a motor torque that accelerates the joint (positive total inertia)",
+                         f"I + J = {A:.4g} kg m2", hint="check the signs of q_m and u (docs/conventions.md)")
+    known = Ws[:, 2:] @ np.array([c, mglx, mgly])
+    Wd = np.column_stack([Ws[:, 0], Ws[:, 1], known, np.ones(known.size)])
+    a_I, a_v, a_k, mz = np.linalg.lstsq(Wd, lp(q_m - q), rcond=None)[0]
+    if not a_k > 0:
+        raise InputError(None, "k", "a positive stiffness: the deflection q_m - q growing with the torque",
+                         f"1/k = {a_k:.4g} rad/(N m)",
+                         hint="check the signs of q, q_m and u (docs/conventions.md) and the deflection")
+    k = 1.0 / a_k
+    I = float(np.clip(a_I * k, 0.05 * A, 0.95 * A))
+    B = max(float(B), 0.0)
+    v = float(np.clip(a_v * k, 0.05 * B, 0.95 * B)) if B > 0 else 0.0
+    return np.array([I, mglx, mgly, max(float(c), 0.0), v, A - I, B - v, k, -mz])
+
+
+def eiv_band_hz(q_m: np.ndarray, fs_hz: float, max_share: float = 1e-3) -> float:
+    """The widest torque band in which the motor angle's own noise, differentiated twice, is a
+    negligible part of the J q_m'' column: the largest f with  int_0^f N <= max_share int_0^f P,
+    N the noise's spectrum after the two central differences (white noise of the SD that the top
+    quarter of q_m's spectrum shows) and P the measured q_m'' spectrum (Welch, 2 s windows). An
+    errors-in-variables regressor biases its parameter by about that share. Hz."""
+    from scipy.signal import welch
+
+    from .conditioning import noise_floor_sd
+
+    sm = noise_floor_sd(q_m, fs_hz)
+    _, qdd = derivatives(q_m, fs_hz)
+    nper = int(min(q_m.size, max(64, 2 * fs_hz)))
+    f, P = welch(qdd, fs=fs_hz, nperseg=nper)
+    h = 1.0 / fs_hz
+    N = sm ** 2 / (fs_hz / 2) * np.sin(2 * np.pi * f * h) ** 4 / h ** 4
+    bad = np.flatnonzero(np.cumsum(N) > max_share * np.cumsum(P))
+    bad = bad[bad > 0]
+    return float(f[bad[0] - 1]) if bad.size else float(f[-1])
+
+
+def encoder_band_hz(q_m: np.ndarray, fs_hz: float, ratio: float = 10.0) -> float:
+    """The frequency above which the motor angle's spectrum stays within `ratio` x its white noise
+    floor (the encoder's noise, :func:`.conditioning.noise_floor_sd`): beyond it q_m is mostly
+    noise. Welch spectrum with 4 s windows, Hz (fs / 2 when it never sinks that low)."""
+    from scipy.signal import welch
+
+    from .conditioning import noise_floor_sd
+
+    sm = noise_floor_sd(q_m, fs_hz)
+    nper = int(min(q_m.size, max(64, 4 * fs_hz)))
+    f, P = welch(q_m, fs=fs_hz, nperseg=nper)
+    high = np.flatnonzero(P > ratio * sm ** 2 / (fs_hz / 2))
+    return float(f[high[-1] + 1]) if high.size and high[-1] + 1 < f.size else float(fs_hz / 2)
+
+
+def _noise_models(prob: _Problem, x) -> tuple:
+    """Whitening filters and innovation SDs of both residuals at x."""
+    r_q, r_u = prob.raw(x)
+    keep = ~prob.d.filled
+    a_q, v_q = burg_ar(_bridge(r_q, keep), 10)
+    a_u, v_u = burg_ar(r_u, 20)
+    return (a_q, math.sqrt(max(v_q, 1e-300))), (a_u, math.sqrt(max(v_u, 1e-300)))
+
+
+def _bridge(r, keep):
+    """r with its unmeasured samples interpolated (for the autoregressive fit only)."""
+    if keep.all():
+        return r
+    idx = np.arange(r.size)
+    return np.interp(idx, idx[keep], r[keep])
+
+
+def identify_output_error(t, q, q_m, u, *, fs_hz: float, measured=None, controller=None,
+                          band_hz: float | None = None, trim_s: float = 1.0,
+                          friction_scales=FRICTION_SCALES, x0=None, max_nfev: int = 40,
+                          link_band_fraction: float = LINK_BAND_FRACTION) -> OutputErrorResult:
+    """Identify I, mglx, mgly, c, v, J, b, k (and the mocap zero z) by output error (module
+    docstring).
+
+    Parameters
+    ----------
+    t, q, q_m, u : (T,) float
+        Times (s, uniform at fs_hz), link angle from mocap (rad), motor angle / gear ratio (rad),
+        motor torque x gear ratio (N m), on one clock: the link side (docs/conventions.md).
+    fs_hz : float
+    measured : (T,) bool, optional
+        True where q was measured (False where a gap was filled); default all.
+    controller : (t_c, q_m_c, u_c, fs_c_hz), optional
+        The controller's own samples over the same span (uniform at fs_c_hz, same clock as t):
+        the simulation and the torque comparison then run at that rate, and (t, q) are the mocap
+        samples. Default: everything on t.
+    band_hz : float, optional
+        The torque comparison band; default 0.4 x the torque's rate, at most 60 Hz.
+    trim_s : float
+        Seconds at each end left out of the comparison (the simulation's start, filter edges).
+    friction_scales : starting values of the tanh law's eps / RMS motor velocity (FRICTION_SCALES).
+    x0 : (9,) start in OE_NAMES order; default from a rigid sum equation and the deflection.
+    max_nfev : least-squares evaluations per fit.
+
+    Raises
+    ------
+    InputError
+        Bad signals, a recording too short, signs that make the joint non-physical.
+    """
+    t, q, q_m, u = check_signals(t, q, q_m, u, fs_hz)
+    measured = np.ones(t.size, bool) if measured is None else np.asarray(measured, bool)
+    if measured.shape != t.shape:
+        raise InputError(None, "measured", f"a (T,) = {t.shape} bool mask", measured.shape)
+    trim = int(round(trim_s * fs_hz))
+    if t.size < 2 * trim + int(5 * fs_hz):
+        raise InputError(None, "t", f"at least {2 * trim_s + 5:.0f} s of signals for output-error identification",
+                         f"{t.size / fs_hz:.2f} s")
+    if controller is None:
+        t_c, q_m_c, u_c, fs_c = t, q_m, u, fs_hz
+    else:
+        t_c, q_m_c, u_c, fs_c = controller
+        fs_c = float(fs_c)
+        t_c, q_m_c, _, u_c = check_signals(t_c, q_m_c, q_m_c, u_c, fs_c)
+        if t[0] < t_c[0] - 1e-9 or t[-1] > t_c[-1] + 1e-9:
+            raise InputError(None, "controller", "controller samples covering the mocap span",
+                             f"[{t_c[0]:.4f}, {t_c[-1]:.4f}] s for [{t[0]:.4f}, {t[-1]:.4f}] s")
+    f_exc = excitation_bandwidth_hz(q_m, fs_hz)
+    band0 = float(np.clip(3.0 * f_exc, 1.0, fs_hz / 5.0))
+    x = _initial(q, q_m, u, fs_hz, band0, trim) if x0 is None else np.asarray(x0, dtype=np.float64)
+    f_eiv = eiv_band_hz(q_m_c, fs_c)
+    f_max = min(0.4 * fs_c, 60.0, max(f_eiv, band0))
+    u_rms = float(np.sqrt(np.mean(u ** 2)))
+    v_rms = max(float(np.std(np.gradient(q_m_c) * fs_c)), 1e-9)
+    scale = np.array([x[0], 1e-3 * u_rms, 1e-3 * u_rms, 1e-3 * u_rms, 1e-3 * u_rms / v_rms, x[5],
+                      1e-3 * u_rms / v_rms, x[7], 1e-6, 1e-3])
+    x = np.concatenate([x, [0.0]])
+    nfev = 0
+    datas = {}
+
+    def data_at(b_hz):
+        if b_hz not in datas:
+            datas[b_hz] = _Data(t_c, q_m_c, u_c, fs_c, t, q, measured, trim_s, b_hz)
+        return datas[b_hz]
+
+    def fit(b_hz, law, x_start, noise=None, budget=max_nfev, coarse=False):
+        """One fit in band b_hz under `law`. noise None: weighted by the residuals' SDs (no
+        whitening); "white": that, then whitened by the residuals' autoregressive models; or the
+        given models. coarse: a 3x coarser simulation (for the searches before the final fit)."""
+        nonlocal nfev
+        prob = _Problem(data_at(b_hz), law, scale, max_phase=0.15 if coarse else 0.05)
+        if noise is None or noise == "white":
+            r_q, r_u = prob.raw(x_start)
+            prob.set_noise(((np.array([1.0]), max(float(np.std(r_q)), 1e-12)),
+                            (np.array([1.0]), max(float(np.std(r_u)), 1e-12))))
+            if noise is None:
+                xs, cost, n = _solve(prob, x_start, budget)
+                nfev += n
+                return prob, xs, cost
+            x_start, _, n = _solve(prob, x_start, budget)
+            nfev += n
+            noise = _noise_models(prob, x_start)
+        prob.set_noise(noise)
+        xs, cost, n = _solve(prob, x_start, budget)
+        nfev += n
+        if _DEBUG:
+            print(f"  fit band {b_hz:.2f} {law} cost {cost:.1f} n {n}", " ".join(f"{v:.4g}" for v in xs))
+        return prob, xs, cost
+
+    # 1. the split of the total inertia I + J: the cost in the excitation's band can have a second
+    #    minimum at a light, stiff link; short fits from several splits, the best kept
+    b0 = min(band0, f_max) if band_hz is None else float(band_hz)
+    A = x[_IDX["I"]] + x[_IDX["J"]]
+    prob0, _, _ = fit(b0, "sign", x, None, 1, coarse=True)
+    noise0 = ((prob0.a_q, prob0.s_q), (prob0.a_u, prob0.s_u))
+    best = None
+    for frac in (None, 0.1, 0.3, 0.5, 0.7, 0.9):
+        xs = x.copy()
+        if frac is not None:
+            xs[_IDX["I"]], xs[_IDX["J"]] = frac * A, (1 - frac) * A
+        _, xs, c = fit(b0, "sign", xs, noise0, 8, coarse=True)
+        if best is None or c < best[0]:
+            best = (c, xs)
+    x = best[1]
+    # 2. the Coulomb law in that band: sign with sticking, or tanh with eps fitted from the best
+    #    of a few starting values
+    prob_s, x_s, cost_s = fit(b0, "sign", x, None, 25, coarse=True)
+    noise0 = ((prob_s.a_q, prob_s.s_q), (prob_s.a_u, prob_s.s_u))
+    tanh_fits = []
+    for e in friction_scales:
+        xe = x_s.copy()
+        xe[_IDX["eps"]] = float(np.clip(e * v_rms, *EPS_RANGE_RAD_S))
+        tanh_fits.append(fit(b0, "tanh", xe, noise0, 6, coarse=True))
+    prob_t, x_t, cost_t = fit(b0, "tanh", min(tanh_fits, key=lambda f: f[2])[1], noise0, 25, coarse=True)
+    scores = {0.0: cost_s, float(x_t[_IDX["eps"]]): cost_t}
+    law, x = ("tanh", x_t) if cost_t < cost_s - 2.0 else ("sign", x_s)
+    # 3. the band widened with it, in steps of 3, up to a fraction of the link's resonance (above
+    #    it the torque rings after every stick and slip of the friction, whose fine shape the model
+    #    cannot be trusted with), the motor angle's noise limit and 60 Hz
+    band = b0
+    if band_hz is None:
+        for _ in range(4):
+            f_link = math.sqrt(x[_IDX["k"]] / x[_IDX["I"]]) / (2 * math.pi)
+            target = max(b0, min(f_max, link_band_fraction * f_link))
+            if target <= band * 1.05:
+                break
+            band = min(target, 3.0 * band)
+            _, x, _ = fit(band, law, x, None, 25, coarse=True)
+    # 4. the final fit: whitened, and once more with the noise models of its residuals
+    prob, x, cost = fit(band, law, x, "white")
+    prob, x, cost = fit(band, law, x, _noise_models(prob, x))
+    data = datas[band]
+    eps = float(x[_IDX["eps"]])
+    r = prob.fun(x[prob.free])
+    Jm = prob.jac_full(x)
+    r_q, r_u = prob.raw(x)
+
+    # covariances: the model's and the Newey-West sandwich; the larger SD per parameter
+    lo, _ = _bounds()
+    at_bound = tuple(n for n in ("c", "v", "b") if x[_IDX[n]] <= lo[_IDX[n]] + 1e-6 * scale[_IDX[n]])
+    free = prob.free & np.array([n not in at_bound for n in OE_NAMES])
+    Jf = Jm[:, free]
+    sc = np.linalg.norm(Jf, axis=0)
+    sc[sc == 0] = 1.0
+    inv = np.linalg.pinv((Jf / sc).T @ (Jf / sc)) / np.outer(sc, sc)
+    n_obs, n_par = r.size, int(free.sum())
+    s2 = float(r @ r) / max(n_obs - n_par, 1)
+    cov_model = np.full((len(OE_NAMES), len(OE_NAMES)), np.nan)
+    cov_sand = cov_model.copy()
+    cov_model[np.ix_(free, free)] = inv * max(s2, 1.0)
+    cov_sand[np.ix_(free, free)] = sandwich_cov(Jf, r, time_index=prob.time_index())
+    var = np.fmax(np.diag(cov_model), np.diag(cov_sand))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        d = np.sqrt(var / np.diag(cov_model))
+        cov = cov_model * np.outer(d, d)
+        std = np.sqrt(var)
+        rel = np.where(x != 0, 100.0 * std / np.abs(x), np.nan)
+    ub = data.u_b - data.u_b.mean()
+    fit_ls = LSResult(names=OE_NAMES, values=x, std=std, rel_std_pct=rel, cov=cov,
+                      cond=float(np.linalg.cond(Jf / sc)),
+                      residual_rms=float(np.sqrt(np.mean(r_u ** 2))),
+                      rel_error_pct=float(100 * np.linalg.norm(r_u) / np.linalg.norm(data.u_b)),
+                      r2=float(1 - (r_u @ r_u) / (ub @ ub)), n_samples=int(n_obs))
+    # the spring's samples, on the mocap clock
+    q_s_c, w_s_c = prob.simulate(x)
+    inner = slice(trim, t.size - trim)
+    fc = min(10.0, 0.4 * fs_hz)
+    q_s = np.interp(t, t_c, q_s_c)
+    qd_m, qdd_m = derivatives(q_m, fs_hz)
+    tau_s_motor = lowpass(u - x[_IDX["J"]] * qdd_m - x[_IDX["b"]] * qd_m, fs_hz, fc)[inner]
+    return OutputErrorResult(fit=fit_ls, cov_model=cov_model, cov_sandwich=cov_sand, at_bound=at_bound,
+                             friction_scale=eps, band_hz=float(data.band), sigma_q=float(np.std(r_q)),
+                             sigma_u=float(np.std(r_u)), ar_q=prob.a_q, ar_u=prob.a_u, t=t[inner],
+                             delta_sim=(q_m - q_s)[inner], tau_s=x[_IDX["k"]] * (q_m - q_s)[inner],
+                             delta_mocap=lowpass(q_m - (q - x[_IDX["z"]]), fs_hz, fc)[inner],
+                             tau_s_motor=tau_s_motor, scores=scores, n_iter=nfev)
