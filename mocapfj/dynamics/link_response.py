@@ -4,7 +4,9 @@ model of output-error identification, run hundreds of times per fit.
 The link equation (Lightcap and Banks 2007, eq. 4; signs docs/conventions.md) with the motor angle
 given (its position loop is stiff; the motor equation then gives the torque):
 
-    I q'' + v q' + f + G(q) = k (q_m - q),      G(q) = -mglx sin q + mgly cos q
+    I q'' + v q' + f + G(q) = tau_s(q_m - q),      G(q) = -mglx sin q + mgly cos q
+
+with the spring tau_s(delta) = k delta + k3 delta^3 (k3 = 0: linear; k3 > 0: stiffening)
 
 with Coulomb friction f = c sign(q') as a set-valued law: when the link is at rest and the net
 torque is below c it stays at rest (sticks). That stick phase matters: at every reversal of the
@@ -21,10 +23,9 @@ leaves errors of 1e-5 rad at 250 Hz on a PA-10 joint, a few percent of its defle
   when the velocity would change sign within the step, the step is split where it reaches zero
   (velocity taken linear in the step), and the rest of the step either sticks (the net torque is
   below c) or slides the other way. From rest the link breaks away when the net torque exceeds c.
-- ``eps > 0``: the friction at the step's mean velocity (implicit midpoint, solved by Newton),
-  with substeps short enough that the law is not stiff (h c / (eps I) <= 0.5, up to 64 substeps
-  per sample); a law still stiffer than that is sign(q') within the velocity the step resolves,
-  and is integrated as such.
+- ``eps > 0``: the friction at the step's mean velocity (implicit midpoint, solved by Newton);
+  a law stiffer than the substep resolves (h c / (eps I) > 1) is sign(q') within the velocity
+  the step resolves, and is integrated as such.
 
 The motor angle is interpolated between samples by cubic Hermite with its velocity (linear
 interpolation would lower the angle the spring sees by h^2 q_m'' / 12 on average: an inertia
@@ -46,9 +47,9 @@ from ..errors import InputError
 __all__ = ["link_response", "substeps", "N_SENS"]
 
 _KERNEL = None
-N_SENS = 7
+N_SENS = 8
 """Parameters the sensitivities are taken with respect to, in this order: I, mglx, mgly, c, v, k,
-eps (the last 0 under the sign law)."""
+eps (0 under the sign law), k3."""
 
 
 def _kernel():
@@ -58,19 +59,19 @@ def _kernel():
         from numba import njit
 
         @njit(cache=True, fastmath=False)
-        def run(q_m, qd_m, dt, n_sub, I, mglx, mgly, c, v, k, eps, q0, w0, dq0, sens):  # pragma: no cover - compiled
+        def run(q_m, qd_m, dt, n_sub, I, mglx, mgly, c, v, k, eps, k3, q0, w0, dq0, sens):  # pragma: no cover - compiled
             T = q_m.shape[0]
             q_out = np.empty(T)
             w_out = np.empty(T)
-            ns = 7 if sens else 0
+            ns = 8 if sens else 0
             Sq = np.zeros((T, ns))
             Sw = np.zeros((T, ns))
             dq = dq0.copy()
-            dw = np.zeros(7)
-            dqm = np.zeros(7)
-            dF = np.zeros(7)
-            dp = np.zeros(7)
-            dmass = np.zeros(7)
+            dw = np.zeros(8)
+            dqm = np.zeros(8)
+            dF = np.zeros(8)
+            dp = np.zeros(8)
+            dmass = np.zeros(8)
             h = dt / n_sub
             mass = I + 0.5 * h * v
             dmass[0] = 1.0
@@ -82,7 +83,7 @@ def _kernel():
             q_out[0] = q
             w_out[0] = w
             if sens:
-                for j in range(7):
+                for j in range(8):
                     Sq[0, j] = dq[j]
             for i in range(1, T):
                 a = q_m[i - 1]
@@ -98,23 +99,25 @@ def _kernel():
                     qmid = q + 0.5 * h * w
                     sn = math.sin(qmid)
                     cs = math.cos(qmid)
-                    F = k * (qm - qmid) + mglx * sn - mgly * cs
+                    dl = qm - qmid
+                    F = (k + k3 * dl * dl) * dl + mglx * sn - mgly * cs
                     p = I * w + h * F - 0.5 * h * v * w      # momentum without friction
                     if sens:
-                        dFdq = -k + mglx * cs + mgly * sn
-                        for j in range(7):
+                        dFdq = -(k + 3.0 * k3 * dl * dl) + mglx * cs + mgly * sn
+                        for j in range(8):
                             dqm[j] = dq[j] + 0.5 * h * dw[j]
                             dF[j] = dFdq * dqm[j]
-                        dF[5] += qm - qmid
+                        dF[5] += dl
+                        dF[7] += dl * dl * dl
                         dF[1] += sn
                         dF[2] -= cs
-                        for j in range(7):
+                        for j in range(8):
                             dp[j] = I * dw[j] + h * dF[j] - 0.5 * h * v * dw[j]
                         dp[0] += w
                         dp[4] -= 0.5 * h * w
                     if eps > 0.0:
                         # mass w1 + h c tanh(wf / eps) = p with wf = (w + w1) / 2: Newton
-                        w1 = p / mass
+                        w1 = w                               # the velocity changes little per substep
                         th = 0.0
                         for _ in range(50):
                             th = math.tanh(0.5 * (w + w1) / eps)
@@ -122,13 +125,13 @@ def _kernel():
                             dg = mass + 0.5 * h * c * (1.0 - th * th) / eps
                             dw1 = g / dg
                             w1 -= dw1
-                            if abs(dw1) <= 1e-13 * (abs(w1) + eps):
+                            if abs(dw1) <= 1e-12 * (abs(w1) + eps):
                                 break
                         if sens:
                             th = math.tanh(0.5 * (w + w1) / eps)
                             sech2 = 1.0 - th * th
                             den = mass + 0.5 * h * c * sech2 / eps
-                            for j in range(7):
+                            for j in range(8):
                                 dwj = (dp[j] - dmass[j] * w1 - 0.5 * h * c * sech2 * dw[j] / eps) / den
                                 if j == 3:
                                     dwj -= h * th / den
@@ -143,7 +146,7 @@ def _kernel():
                         w1 = (p - sg * h * c) / mass
                         if w1 * sg >= 0.0:                   # slides one way all along: exact
                             if sens:
-                                for j in range(7):
+                                for j in range(8):
                                     dwj = (dp[j] - dmass[j] * w1) / mass
                                     if j == 3:
                                         dwj -= sg * h / mass
@@ -157,10 +160,11 @@ def _kernel():
                             q_stop = q + 0.5 * h * frac * w
                             sn2 = math.sin(q_stop)
                             cs2 = math.cos(q_stop)
-                            F2 = k * (qm - q_stop) + mglx * sn2 - mgly * cs2
+                            d2 = qm - q_stop
+                            F2 = (k + k3 * d2 * d2) * d2 + mglx * sn2 - mgly * cs2
                             a_minus = (w1 - w) / h
                             if sens:                         # at the stop: velocity linear in the step
-                                for j in range(7):
+                                for j in range(8):
                                     dw1c = (dp[j] - dmass[j] * w1) / mass
                                     if j == 3:
                                         dw1c -= sg * h / mass
@@ -171,7 +175,7 @@ def _kernel():
                                 w = 0.0
                                 q = q_stop
                                 if sens:
-                                    for j in range(7):
+                                    for j in range(8):
                                         dw[j] = 0.0
                             else:                            # turns: the friction flips at the stop
                                 sg2 = 1.0 if F2 > 0.0 else -1.0
@@ -181,13 +185,15 @@ def _kernel():
                                 if sens:
                                     # the stop time moves with theta: the velocity's sensitivity
                                     # jumps by the ratio of the accelerations after and before
-                                    dFdq2 = -k + mglx * cs2 + mgly * sn2
+                                    dFdq2 = -(k + 3.0 * k3 * d2 * d2) + mglx * cs2 + mgly * sn2
                                     ratio = a_plus / a_minus
-                                    for j in range(7):
+                                    for j in range(8):
                                         dwe = ratio * dw[j]
                                         dF2 = dFdq2 * dq[j]
                                         if j == 5:
-                                            dF2 += qm - q_stop
+                                            dF2 += d2
+                                        elif j == 7:
+                                            dF2 += d2 * d2 * d2
                                         elif j == 1:
                                             dF2 += sn2
                                         elif j == 2:
@@ -203,13 +209,13 @@ def _kernel():
                         if abs(F) <= c:
                             w = 0.0
                             if sens:
-                                for j in range(7):
+                                for j in range(8):
                                     dw[j] = 0.0
                         else:
                             sg = 1.0 if F > 0.0 else -1.0
                             w = h * (F - sg * c) / mass
                             if sens:
-                                for j in range(7):
+                                for j in range(8):
                                     dFj = dF[j] - (sg if j == 3 else 0.0)
                                     dwj = (h * dFj - w * dmass[j]) / mass
                                     dq[j] = dq[j] + 0.5 * h * dwj
@@ -218,7 +224,7 @@ def _kernel():
                 q_out[i] = q
                 w_out[i] = w
                 if sens:
-                    for j in range(7):
+                    for j in range(8):
                         Sq[i, j] = dq[j]
                         Sw[i, j] = dw[j]
             return q_out, w_out, Sq, Sw
@@ -233,16 +239,17 @@ def substeps(I: float, k: float, dt: float, max_phase: float = 0.05) -> int:
 
 
 def link_response(q_m, fs_hz: float, *, I: float, mglx: float, mgly: float, c: float, v: float, k: float,
-                  eps: float = 0.0, qd_m=None, q0: float | None = None, w0: float | None = None,
+                  eps: float = 0.0, k3: float = 0.0, qd_m=None, q0: float | None = None, w0: float | None = None,
                   n_sub: int | None = None, sensitivities: bool = False, max_phase: float = 0.05):
     """The link's angle q (T,) rad and velocity q' (T,) rad/s under the motor angle q_m (T,) rad
     sampled at fs_hz (module docstring); `qd_m` (T,) rad/s its velocity (default: central
     differences). `max_phase`: the resonance's advance per substep (accuracy, :func:`substeps`).
     Starts at the static equilibrium of the first sample (q0 = q_m[0] + G / k) moving
-    with the motor (w0 = qd_m[0]) unless given. I, k > 0 and c, v, eps >= 0 (SI, link side).
+    with the motor (w0 = qd_m[0]) unless given. I, k > 0 and c, v, eps >= 0 (SI, link side); k3
+    (N m/rad^3) the spring's cubic term.
 
-    With ``sensitivities=True`` it returns (q, q', dq/dtheta (T, 6), dq'/dtheta (T, 6)) for theta
-    = (I, mglx, mgly, c, v, k), propagated through every substep (the derivative of the update;
+    With ``sensitivities=True`` it returns (q, q', dq/dtheta (T, 8), dq'/dtheta (T, 8)) for theta
+    = (I, mglx, mgly, c, v, k, eps, k3), propagated through every substep (the derivative of the update;
     where the sign law stops the link within a step, the stop time's own dependence on theta is
     taken as linear in the step; a reversal without sticking carries the velocity's sensitivity
     over by the ratio of the accelerations after and before, the saltation of a friction switch;
@@ -259,15 +266,13 @@ def link_response(q_m, fs_hz: float, *, I: float, mglx: float, mgly: float, c: f
     if q0 is None:
         g = -mglx * math.sin(q_m[0]) + mgly * math.cos(q_m[0])
         q0 = q_m[0] - g / k
-        dq0[1], dq0[2], dq0[5] = math.sin(q_m[0]) / k, -math.cos(q_m[0]) / k, g / k ** 2
+        dq0[1], dq0[2], dq0[5] = math.sin(q_m[0]) / k, -math.cos(q_m[0]) / k, g / k ** 2   # (k3 neglected)
     if w0 is None:
         w0 = qd_m[0]
     if n_sub is None:
         n = substeps(I, k, dt, max_phase)
-        if eps > 0 and c > 0:                       # the tanh law not stiff at the substep
-            n = max(n, min(64, int(math.ceil(2.0 * dt * c / (eps * I) * (0.05 / max_phase)))))
     else:
         n = int(n_sub)
     q, w, Sq, Sw = _kernel()(q_m, qd_m, dt, n, float(I), float(mglx), float(mgly), float(c), float(v), float(k),
-                             float(eps), float(q0), float(w0), dq0, bool(sensitivities))
+                             float(eps), float(k3), float(q0), float(w0), dq0, bool(sensitivities))
     return (q, w, Sq, Sw) if sensitivities else (q, w)
