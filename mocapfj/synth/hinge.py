@@ -42,7 +42,7 @@ keeps the earlier cases. Each quantity is drawn independently (U = uniform, logU
 | harmonics | a_l = w_l / l^p, w_l U(0.3, 1), phases U(0, 2 pi), scaled to the peak; p = 1, raised by 0.25 (to 3) while the reference's peak acceleration exceeds the family's cap (pa10 20, cobot 40, heavy 10 rad/s2) |
 | duration | a whole number of periods n_p / f0, n_p integer U within [max(2, 20 f0), 120 f0], rounded to 0.1 s (20-120 s, >= 2 periods); ramp U(1, 3) s |
 | PD gains | loop bandwidth f_c logU(3, 30) Hz, damping zeta U(0.6, 1.0), on the total inertia I + J: kp = (I + J) (2 pi f_c)^2, kd = 2 zeta (I + J) (2 pi f_c) |
-| torque noise | SD = logU(0.3, 3) % of the RMS of u estimated from the reference with the rigid model ((I + J) r'' + (b + v) r' + c sgn(r') + gravity); kind ``white`` / ``coloured`` (AR(1), tau_c logU(2, 50) ms) / ``quantised`` (quantum Delta with Delta^2/12 = U(0.3, 0.9) of the variance, the rest white, added before quantising), p = 1/3 each |
+| torque noise | SD = logU(lo, hi) N m, [lo, hi] = [0.05, 6] N m (the range a lab's drives log) intersected with [0.1, 3] % of the RMS of u estimated from the reference with the rigid model ((I + J) r'' + (b + v) r' + c sgn(r') + gravity) (a drive's noise scales with its size); kind ``white`` / ``coloured`` (AR(1), tau_c logU(2, 50) ms) / ``quantised`` (quantum Delta with Delta^2/12 = U(0.3, 0.9) of the variance, the rest white, added before quantising), p = 1/3 each |
 | motor angle | resolver bits in {14, 16, 18}; extra white noise 0 (p = 1/2) or logU(1e-5, 1e-4) rad |
 | markers | 3-5 (integer U); noise U(0.1, 0.5) mm per coordinate; dropouts U(0, 3) % of samples in bursts of mean length U(1, 20) frames |
 | cluster | radius scale r_c logU(50 sqrt 3, 800 / sqrt 3) mm, r_p = r_c 3^(U - 1/2) (50-800 mm, within a factor 3); heights along the axis U(-r_c/2, r_c/2); azimuths evenly spaced + U(-0.3, 0.3) of the spacing |
@@ -60,8 +60,8 @@ its stiffness in series with the spring, kp k / (kp + k), exceeds the gravity gr
 sqrt(mglx^2 + mgly^2) by a wide margin in every sampled case. There is no feedforward, so gravity and inertia show up as tracking error.
 Every run starts at rest at the PD/gravity equilibrium (no start transient).
 
-Because the torque noise is relative, its SD spans (5-95 %) ~0.01-0.1 N m for the cobot, ~0.2-3 N m
-for the PA-10 and ~5-65 N m for the heavy joint (whose u RMS is a few thousand N m). The cobot's
+So the torque noise's SD spans about 0.05-0.15 N m for the cobot, 0.1-3 N m for the PA-10 and 4-6 N m
+for the heavy joint (whose u RMS is a few thousand N m). The cobot's
 deflection (~1e-3 rad) is often below the per-sample mocap angle noise (sigma / sqrt(sum r_p^2));
 ``truth["stats"]["deflection_snr"]`` gives the ratio per case.
 
@@ -88,7 +88,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..dynamics import PID, CoulombViscous, LinearSpring, SingleJoint, simulate
+from ..dynamics import PID, BoucWen, CoulombViscous, CubicSpring, LinearSpring, SingleJoint, simulate
 from ..errors import InputError
 from ..io import write_csv_columns, write_json, write_recording
 from ..rotations import rotate
@@ -97,11 +97,13 @@ from .scenario import reference_trajectory
 
 __all__ = ["HingeCase", "FAMILIES", "PARAMETER_NAMES", "simulate_hinge", "write_hinge_bundle", "sample_cases",
            "first_row_case", "small_grid", "fourier_from_peak", "pd_gains", "case_digest", "GENERATOR_VERSION",
-           "logged_torque", "dropout_mask"]
+           "logged_torque", "dropout_mask", "with_spring", "SPRINGS"]
 
 PARAMETER_NAMES = ("I", "mglx", "mgly", "c", "v", "J", "b", "k")
 FRICTION_LAWS = ("sign", "tanh")
 NOISE_KINDS = ("white", "coloured", "quantised")
+SPRINGS = {"linear": 0, "cubic": 1, "bouc_wen": 3}
+"""Spring kinds and how many spring_params each takes."""
 
 FAMILIES = {
     # PA-10 joint 2, Lightcap and Banks (2007), Table I
@@ -216,6 +218,9 @@ class HingeCase:
     # integration
     sim_max_step_s: float | None = None
     sim_rtol: float = 1e-8
+    # spring (the joint's small-deflection stiffness is k in every case)
+    spring: str = "linear"
+    spring_params: tuple[float, ...] = ()
 
     def __post_init__(self) -> None:
         for n in ("I", "J", "k", "gear_ratio", "f0_hz", "duration_s", "mocap_hz", "controller_hz", "kp",
@@ -226,6 +231,10 @@ class HingeCase:
                   "torque_corr_time_s", "torque_quantum_Nm", "motor_noise_rad", "eps_rad_s", "peak_rad"):
             if not (math.isfinite(getattr(self, n)) and getattr(self, n) >= 0):
                 raise InputError(None, f"HingeCase.{n}", "a non-negative number", getattr(self, n))
+        if self.spring not in SPRINGS or len(tuple(self.spring_params)) != SPRINGS[self.spring]:
+            raise InputError(None, "HingeCase.spring", f"one of {sorted(SPRINGS)} with {SPRINGS} parameters",
+                             (self.spring, self.spring_params))
+        object.__setattr__(self, "spring_params", _tuple(self.spring_params, name="spring_params"))
         if self.friction_law not in FRICTION_LAWS:
             raise InputError(None, "HingeCase.friction_law", f"one of {FRICTION_LAWS}", repr(self.friction_law))
         if self.friction_law == "tanh" and not self.eps_rad_s > 0:
@@ -293,10 +302,20 @@ class HingeCase:
         return {"f0_hz": self.f0_hz, "q0_rad": self.q0_rad, "amplitudes_rad": self.amplitudes_rad,
                 "phases_rad": self.phases_rad, "ramp_s": self.ramp_s}
 
+    def spring_element(self):
+        """The spring: linear k; ``cubic`` k delta + k3 delta^3 (spring_params = (k3,), N m/rad^3);
+        ``bouc_wen`` with scale k and spring_params = (alpha, beta, gamma) (A = n = 1)."""
+        if self.spring == "cubic":
+            return CubicSpring(k1=self.k, k3=self.spring_params[0])
+        if self.spring == "bouc_wen":
+            a, b, g = self.spring_params
+            return BoucWen(k=self.k, alpha=a, beta=b, gamma=g)
+        return LinearSpring(self.k)
+
     def model(self) -> SingleJoint:
         """The true joint as a :class:`SingleJoint`, friction smoothed as integrated."""
         eps = self.eps_rad_s if self.friction_law == "tanh" else self.sim_smoothing_rad_s
-        return SingleJoint(I=self.I, J=self.J, spring=LinearSpring(self.k), mglx=self.mglx, mgly=self.mgly,
+        return SingleJoint(I=self.I, J=self.J, spring=self.spring_element(), mglx=self.mglx, mgly=self.mgly,
                            b=self.b, friction=CoulombViscous(self.c, self.v, smoothing=eps), name="j1")
 
     def natural_frequency_hz(self) -> float:
@@ -323,7 +342,7 @@ class HingeCase:
         return asdict(self)
 
 
-GENERATOR_VERSION = 1
+GENERATOR_VERSION = 2
 """Bumped whenever the same case would give a different bundle; part of :func:`case_digest`."""
 
 
@@ -383,13 +402,25 @@ def _pd_equilibrium(case: HingeCase) -> tuple[float, float]:
     for _ in range(100):
         g = -case.mglx * math.sin(q) + case.mgly * math.cos(q)
         qm = r - g / case.kp
-        q_new = qm - g / case.k
+        q_new = qm - _spring_deflection(case, g)
         if abs(q_new - q) < 1e-15:
             q = q_new
             break
         q = q_new
     g = -case.mglx * math.sin(q) + case.mgly * math.cos(q)
     return r - g / case.kp, q
+
+
+def _spring_deflection(case: HingeCase, tau: float) -> float:
+    """The deflection at which the spring holds `tau` from rest (a Bouc-Wen spring's state 0)."""
+    if case.spring == "bouc_wen":
+        return tau / (case.spring_params[0] * case.k)
+    d = tau / case.k
+    if case.spring == "cubic":
+        k3 = case.spring_params[0]
+        for _ in range(50):                       # Newton on k d + k3 d^3 = tau
+            d -= (case.k * d + k3 * d ** 3 - tau) / (case.k + 3 * k3 * d * d)
+    return d
 
 
 def _rigid_torque_rms(params: dict, ref: dict, duration_s: float) -> float:
@@ -627,7 +658,9 @@ def _sample_case(rng: np.random.Generator, seed: int, name: str, family: str, *,
     kp, kd = pd_gains(p["I"], p["J"], _log_uniform(rng, 3.0, 30.0), float(rng.uniform(0.6, 1.0)))
     # measurement
     u_rms = _rigid_torque_rms(p, ref, duration)
-    tau_sd = u_rms * _log_uniform(rng, 0.003, 0.03)
+    hi = min(6.0, 0.03 * u_rms)
+    lo = min(max(0.05, 1e-3 * u_rms), hi)
+    tau_sd = _log_uniform(rng, lo, hi) if hi > lo else hi
     kind = noise_kind or NOISE_KINDS[int(rng.integers(3))]
     corr = _log_uniform(rng, 2e-3, 50e-3) if kind == "coloured" else 0.0
     quantum = tau_sd * math.sqrt(12 * rng.uniform(0.3, 0.9)) if kind == "quantised" else 0.0
@@ -685,6 +718,34 @@ def sample_cases(n: int, base_seed: int, *, family: str | None = None) -> list[H
         fam = family or _family_of(base_seed, i)
         out.append(_sample_case(rng, seed, f"hinge_{base_seed}_{i:03d}", fam))
     return out
+
+
+def with_spring(case: HingeCase, kind: str, seed: int = 0) -> HingeCase:
+    """`case` with a nonlinear spring of the same small-deflection stiffness k, sized to the
+    deflection the case's torque causes (delta_rms ~ torque RMS / k, from the rigid model):
+
+    - ``cubic``: stiffening by U(30, 80) % at 2 delta_rms (k3 = r k / (3 (2 delta_rms)^2));
+    - ``bouc_wen``: alpha U(0.5, 0.8), beta = gamma, the hysteretic state saturating at
+      U(0.3, 1) delta_rms (beta + gamma = 1 / that);
+    - ``linear``: unchanged.
+    Drawn from `seed` alone; the name gets the kind appended."""
+    if kind == "linear":
+        return case
+    rng = np.random.default_rng(np.random.SeedSequence([int(seed), 17]))
+    p = case.params
+    d_rms = _rigid_torque_rms(p, case.reference(), case.duration_s) / case.k
+    if kind == "cubic":
+        r = rng.uniform(0.3, 0.8)
+        params = (r * case.k / (3 * (2 * d_rms) ** 2),)
+    elif kind == "bouc_wen":
+        a = rng.uniform(0.5, 0.8)
+        sat = rng.uniform(0.3, 1.0) * d_rms
+        params = (a, 0.5 / sat, 0.5 / sat)
+    else:
+        raise InputError(None, "kind", f"one of {sorted(SPRINGS)}", repr(kind))
+    from dataclasses import replace
+
+    return replace(case, name=f"{case.name}_{kind}", spring=kind, spring_params=params)
 
 
 def first_row_case(seed: int = 0) -> HingeCase:
