@@ -74,10 +74,16 @@ def judge_parameters(names, values, std, cov, *, duration_s: float, context: dic
     else:
         sd_g = float(math.hypot(sd["mglx"], sd["mgly"]))
     out = {}
+    partner_at_bound = {n for n in ("b", "v") if ({"b", "v"} - {n}) & set(at_bound)}
     for n in PARAMETER_NAMES:
         v, s = val[n], sd[n]
         reason = None
-        if n in at_bound:
+        if n in partner_at_bound and n not in at_bound:
+            other = "b" if n == "v" else "v"
+            tot, tot_sd = combos["b+v"]
+            reason = (f"{other} is held at zero, so {n} carries all of b + v = {tot:.4g} +- {tot_sd:.2g}: the split is "
+                      f"not determined (see {other})")
+        elif n in at_bound:
             reason = (f"held at its bound of zero: the data push {n} below zero, which no joint does; likely causes: "
                       "an undeclared clock offset between mocap and controller (the link then seems to lead or lag "
                       "the motor), a sign or scale error in q_m, q or u (docs/conventions.md), or a friction law the "

@@ -49,10 +49,11 @@ larger of the two.
 from __future__ import annotations
 
 import math
+import time
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.signal import lfilter
+from scipy.signal import lfilter, resample_poly
 
 from ..dynamics.link_response import link_response
 from ..errors import InputError
@@ -64,9 +65,27 @@ __all__ = ["OE_NAMES", "FRICTION_SCALES", "OutputErrorResult", "identify_output_
            "excitation_bandwidth_hz", "burg_ar", "eiv_band_hz",
            "encoder_band_hz"]
 
-OE_NAMES = ("I", "mglx", "mgly", "c", "v", "J", "b", "k", "z", "eps")
+OE_NAMES = ("I", "mglx", "mgly", "c", "v", "J", "b", "k", "z", "eps", "k3")
 _LINK = ("I", "mglx", "mgly", "c", "v", "k")
+_SENS = _LINK + ("eps", "k3")         # the kernel's sensitivities, in its order
 _IDX = {n: i for i, n in enumerate(OE_NAMES)}
+HYSTERESIS_CHI2 = 50.0
+"""A hysteretic spring must lower the whitened cost by this much (seven SDs)..."""
+HYSTERESIS_MIN_SHARE = 0.05
+"""...with a hysteretic stiffness of at least this share of k."""
+AR_ORDER_MAX = (4, 8)
+"""Largest autoregressive orders of the mocap and torque noise models: enough for the broad
+colours of the noise (a drive's filter, the encoder's differentiated noise, the band's edge), too
+few to notch out the excitation's harmonics where a model error leaves structure."""
+CUBIC_CHI2 = 25.0
+"""The cubic spring term must lower the whitened cost by this much (five SDs) to be kept..."""
+CUBIC_MIN_PCT = 5.0
+"""...and change the stiffness by this many percent at the 95th percentile of the deflection."""
+ENCODER_SHIFT_SDS = 2.0
+"""The motor-angle noise's measured shift is removed when it exceeds this many SDs in some parameter."""
+AMBIGUITY_CHI2 = 25.0
+"""A second minimum within this much of the best's (whitened) cost widens the SDs: a quadratic
+profile through both (five SDs apart at this cost) is what the data leave open."""
 LINK_BAND_FRACTION = 0.6
 """The comparison band's upper limit as a fraction of the link's resonance sqrt(k / I) / 2 pi."""
 
@@ -99,6 +118,9 @@ class OutputErrorResult:
         N m), both low-passed at 10 Hz, for the spring model.
     scores : {eps: whitened cost} of every Coulomb law tried.
     n_iter : least-squares evaluations in all.
+    hysteresis : the score test's finding of a hysteretic spring (:func:`_hysteresis_test`), or None.
+    spring_r2 : the motor side's spring torque against the fitted spring along the simulated
+        deflection (both low-passed at 10 Hz, offset removed): coefficient of determination.
     """
 
     fit: LSResult
@@ -118,6 +140,8 @@ class OutputErrorResult:
     tau_s_motor: np.ndarray
     scores: dict
     n_iter: int
+    hysteresis: dict | None = None
+    spring_r2: float = float("nan")
 
     def __getitem__(self, name: str) -> float:
         return self.fit[name]
@@ -172,9 +196,16 @@ class _Data:
         self.trim = trim
         # the torque channel: band-limited and decimated (none when the band is the whole rate)
         self.band = min(float(band_hz), 0.45 * fs_c)
-        self.stride = max(1, int(fs_c // (2.5 * self.band)))
+        stride = max(1, int(fs_c // (2.5 * self.band)))
+        # the band is taken in two stages: a polyphase FIR decimation by m (to about twice the final
+        # rate), then the zero-phase Butterworth at that rate (the same linear filter on data and
+        # model, so the comparison is consistent; 10x cheaper than filtering at the full rate)
+        self.m = max(1, stride // 2)
+        self.stride = self.m * max(1, stride // self.m)
         edge = trim + (int(np.ceil(2.0 * fs_c / self.band)) if self.stride > 1 else 0)
+        edge = self.m * int(np.ceil(edge / self.m))
         self.iu = np.arange(edge, t_c.size - edge, self.stride)
+        self.iu_m = self.iu // self.m
         self.u_b, self.qdd_b, self.qd_b, self.qm_b = (self.band_of(x) for x in (u, self.qdd_m, self.qd_m, q_m))
         # the mocap channel: samples inside the trims, each between two controller samples; in
         # the same band as the torque (low-passed and decimated) when that is below its rate
@@ -206,7 +237,9 @@ class _Data:
     def band_of(self, x):
         if self.stride == 1:
             return np.asarray(x)[self.iu]
-        return lowpass(x, self.fs, self.band)[self.iu]
+        if self.m > 1:
+            x = resample_poly(x, 1, self.m, axis=0)
+        return lowpass(x, self.fs / self.m, self.band)[self.iu_m]
 
     def at_mocap(self, q, w):
         """q (T_c, ...) and w its derivative at the mocap instants (cubic Hermite)."""
@@ -219,11 +252,15 @@ class _Problem:
     """The whitened residuals of one joint under one Coulomb law ("sign" or "tanh"), and their
     Jacobian, as functions of the free parameters (eps is fixed at 0 under the sign law)."""
 
-    def __init__(self, data: _Data, law: str, scale: np.ndarray, noise=None, max_phase: float = 0.05):
+    def __init__(self, data: _Data, law: str, scale: np.ndarray, noise=None, max_phase: float = 0.05,
+                 cubic: bool = False):
         self.d, self.law, self.scale, self.max_phase = data, law, scale, max_phase
         self.free = np.ones(len(OE_NAMES), bool)
+        self.cubic = cubic
         if law == "sign":
             self.free[_IDX["eps"]] = False
+        if not cubic:
+            self.free[_IDX["k3"]] = False
         self.set_noise(noise or ((np.array([1.0]), 1.0), (np.array([1.0]), 1.0)))
         self._cache = (None, None)
         self._x = np.zeros(len(OE_NAMES))
@@ -241,11 +278,13 @@ class _Problem:
         x[self.free] = xf
         if self.law == "sign":
             x[_IDX["eps"]] = 0.0
+        if not self.cubic:
+            x[_IDX["k3"]] = 0.0
         return x
 
     def _link(self, x, sens=False):
         p = dict(zip(OE_NAMES, x))
-        return link_response(self.d.q_m, self.d.fs, eps=p["eps"], qd_m=self.d.qd_m, sensitivities=sens,
+        return link_response(self.d.q_m, self.d.fs, eps=p["eps"], k3=p["k3"], qd_m=self.d.qd_m, sensitivities=sens,
                              max_phase=self.max_phase, **{n: p[n] for n in _LINK})
 
     def simulate(self, x):
@@ -261,9 +300,15 @@ class _Problem:
         x = np.asarray(x, dtype=np.float64)
         q_s, w_s = self.simulate(x)
         r_q = self.d.q - self.d.q_band(self.d.at_mocap(q_s, w_s)) - x[_IDX["z"]]
-        r_u = self.d.u_b - (x[_IDX["J"]] * self.d.qdd_b + x[_IDX["b"]] * self.d.qd_b
-                            + x[_IDX["k"]] * (self.d.qm_b - self.d.band_of(q_s)))
+        r_u = self.d.u_b - (x[_IDX["J"]] * self.d.qdd_b + x[_IDX["b"]] * self.d.qd_b + self._spring_b(x, q_s))
         return r_q, r_u
+
+    def _spring_b(self, x, q_s):
+        """The spring torque k delta + k3 delta^3 (delta = q_m - q_sim) in the band."""
+        tau = x[_IDX["k"]] * (self.d.qm_b - self.d.band_of(q_s))
+        if x[_IDX["k3"]] != 0.0:
+            tau = tau + x[_IDX["k3"]] * self.d.band_of((self.d.q_m - q_s) ** 3)
+        return tau
 
     def _white(self, r_q, r_u):
         wq = lfilter(self.a_q, [1.0], r_q, axis=0)[self.keep_q] / self.s_q
@@ -276,16 +321,22 @@ class _Problem:
     def jac_full(self, x):
         """The whitened Jacobian with respect to every parameter (rows as fun's)."""
         x = np.asarray(x, dtype=np.float64)
-        q_s, w_s, Sq, Sw = self._link(x, sens=True)           # d q_sim / d (link parameters, eps)
+        q_s, w_s, Sq, Sw = self._link(x, sens=True)           # d q_sim / d (link parameters, eps, k3)
         Sm = self.d.q_band(self.d.at_mocap(Sq, Sw))
-        Sb = self.d.band_of(Sq)
-        k = x[_IDX["k"]]
+        delta = self.d.q_m - q_s
+        k, k3 = x[_IDX["k"]], x[_IDX["k3"]]
+        cols = [j for j, n in enumerate(_SENS) if self.free[_IDX[n]]]         # only what is fitted
+        Sc = Sq[:, cols]
+        Sb = self.d.band_of(Sc * (k + 3.0 * k3 * delta ** 2)[:, None] if k3 != 0.0 else k * Sc)
         Jq = np.zeros((Sm.shape[0], len(OE_NAMES)))
         Ju = np.zeros((Sb.shape[0], len(OE_NAMES)))
-        for j, n in enumerate(_LINK + ("eps",)):
+        for i, j in enumerate(cols):
+            n = _SENS[j]
             Jq[:, _IDX[n]] = -Sm[:, j]
-            Ju[:, _IDX[n]] = k * Sb[:, j]
+            Ju[:, _IDX[n]] = Sb[:, i]
         Ju[:, _IDX["k"]] -= self.d.qm_b - self.d.band_of(q_s)
+        if self.free[_IDX["k3"]]:
+            Ju[:, _IDX["k3"]] -= self.d.band_of(delta ** 3)
         Ju[:, _IDX["J"]] = -self.d.qdd_b
         Ju[:, _IDX["b"]] = -self.d.qd_b
         Jq[:, _IDX["z"]] = -1.0
@@ -312,7 +363,7 @@ def _bounds():
     return lo, hi
 
 
-def _solve(prob: _Problem, x0, max_nfev: int):
+def _solve(prob: _Problem, x0, max_nfev: int, ftol: float = 1e-10):
     """Trust-region reflective least squares from x0 (full vector) over the free parameters:
     (x, cost, evaluations)."""
     from scipy.optimize import least_squares
@@ -324,7 +375,7 @@ def _solve(prob: _Problem, x0, max_nfev: int):
     # strictly inside the bounds (I, J, k > 0; a parameter at 0 is started just above it)
     xf = np.minimum(np.maximum(x0[f], lo[f] + 1e-6 * prob.scale[f]), np.where(np.isfinite(hi[f]), 0.999 * hi[f], np.inf))
     res = least_squares(prob.fun, xf, jac=prob.jac, bounds=(lo[f], hi[f]), method="trf", x_scale="jac",
-                        ftol=1e-10, xtol=1e-9, gtol=1e-10, max_nfev=max_nfev)
+                        ftol=ftol, xtol=1e-9, gtol=1e-10, max_nfev=max_nfev)
     return prob.full(res.x), float(res.fun @ res.fun), int(res.nfev)
 
 
@@ -348,7 +399,10 @@ def _initial(q, q_m, u, fs_hz, band_hz, trim):
     sgn = np.tanh(qd / (0.02 * max(float(np.std(qd)), 1e-9)))
     Ws = lp(np.column_stack([qdd, qd, sgn, -np.sin(q_m), np.cos(q_m)]))
     ub = lp(u)
-    A, B, c, mglx, mgly = np.linalg.lstsq(Ws, ub, rcond=None)[0]
+    from .ls import ls_fit
+
+    # ls_fit names the columns the motion does not excite (a motor standing still: all of them)
+    A, B, c, mglx, mgly = ls_fit(Ws, ub, ("I + J", "b + v", "c", "mglx", "mgly")).values
     if not A > 0:
         raise InputError(None, "u, q_m", "a motor torque that accelerates the joint (positive total inertia)",
                          f"I + J = {A:.4g} kg m2", hint="check the signs of q_m and u (docs/conventions.md)")
@@ -402,12 +456,88 @@ def encoder_band_hz(q_m: np.ndarray, fs_hz: float, ratio: float = 10.0) -> float
     return float(f[high[-1] + 1]) if high.size and high[-1] + 1 < f.size else float(fs_hz / 2)
 
 
+def _encoder_noise_shift(q_m_c, fs_c, u_c, t_c, t, q, measured, trim_s, band, law, scale, prob, x, free,
+                         replicates: int = 2):
+    """The Gauss-Newton step from x that a second dose of the motor angle's white noise (its SD
+    from the spectrum's floor, :func:`.conditioning.noise_floor_sd`) causes, averaged over
+    `replicates` fixed-seed draws: (10,) with zeros for fixed parameters, or None when the angle
+    shows no noise above its quantisation."""
+    from .conditioning import noise_floor_sd
+
+    sm = noise_floor_sd(q_m_c, fs_c)
+    if not sm > 0:
+        return None
+    rng = np.random.default_rng(20261124)
+    noise = ((prob.a_q, prob.s_q), (prob.a_u, prob.s_u))
+    steps = []
+    for _ in range(replicates):
+        d2 = _Data(t_c, q_m_c + rng.normal(0.0, sm, q_m_c.size), u_c, fs_c, t, q, measured, trim_s, band)
+        p2 = _Problem(d2, law, scale, noise, cubic=prob.cubic)
+        J = p2.jac_full(x)[:, free]
+        r = p2.fun(x[p2.free])
+        sc = np.linalg.norm(J, axis=0)
+        sc[sc == 0] = 1.0
+        step = -np.linalg.lstsq(J / sc, r, rcond=None)[0] / sc
+        steps.append(step)
+    out = np.zeros(x.size)
+    out[free] = np.mean(steps, axis=0)
+    return out
+
+
+def _hysteresis_test(prob: _Problem, x) -> dict | None:
+    """A score test for a hysteretic spring at the fitted linear one: the Bouc-Wen spring
+    alpha k delta + (1 - alpha) k z(delta; beta = gamma) adds k_h (z - delta) (k_h = (1 - alpha) k)
+    to the motor torque; its whitened column along the simulated (noise-free) deflection, made
+    orthogonal to the fit's Jacobian, is regressed on the whitened residual for a few loop widths.
+    Found when the best lowers the cost by HYSTERESIS_CHI2 with a positive k_h that is at least
+    HYSTERESIS_MIN_SHARE of k: {alpha, beta, gamma, k_h, chi2}; else None. Below the link's
+    resonance its load fixes the spring torque, so a loop shows in the deflection, not in the
+    motor torque: the column is the mocap angle's shift (z - delta) k_h / k. (A test, not a fit.)"""
+    from .springs import bouc_wen_path
+
+    d = prob.d
+    q_s, _ = prob.simulate(x)
+    delta = d.q_m - q_s
+    span = float(np.percentile(delta, 99) - np.percentile(delta, 1))
+    if not span > 0:
+        return None
+    stride = max(1, int(d.fs // (8.0 * d.band)))
+    k = x[_IDX["k"]]
+    J = prob.jac_full(x)[:, prob.free]
+    r = prob.fun(x[prob.free])
+    Q, _ = np.linalg.qr(J / np.maximum(np.linalg.norm(J, axis=0), 1e-300))
+    best = None
+    for width in (0.03, 0.1, 0.3, 1.0):                     # the loop saturates over this share of the span
+        bg = 0.5 / (width * span)
+        z = bouc_wen_path(delta, 1.0, bg, bg, stride)
+        # with the link's load fixed (below its resonance) the spring torque does not change: a
+        # loop shifts the deflection instead, q by (z - delta) k_h / k, seen by the mocap
+        w = (z - delta) / k
+        col_q = -d.q_band(d.at_mocap(w, np.gradient(w) * d.fs))
+        c = np.concatenate(prob._white(col_q, np.zeros(d.iu.size)))
+        c = c - Q @ (Q.T @ c)
+        cc = float(c @ c)
+        if cc <= 0:
+            continue
+        coef = -float(c @ r) / cc                          # r(x + coef e) ~ r + coef c
+        gain = float(c @ r) ** 2 / cc
+        if best is None or gain > best["chi2"]:
+            best = {"chi2": gain, "k_h": coef, "beta": bg, "gamma": bg}
+    k = x[_IDX["k"]]
+    if _DEBUG:
+        print("hysteresis test", best, "k", k)
+    if best is None or not (best["chi2"] > HYSTERESIS_CHI2 and best["k_h"] > HYSTERESIS_MIN_SHARE * k):
+        return None
+    best["alpha"] = float(max(0.0, 1.0 - best["k_h"] / k))
+    return best
+
+
 def _noise_models(prob: _Problem, x) -> tuple:
     """Whitening filters and innovation SDs of both residuals at x."""
     r_q, r_u = prob.raw(x)
     keep = ~prob.d.filled
-    a_q, v_q = burg_ar(_bridge(r_q, keep), 10)
-    a_u, v_u = burg_ar(r_u, 20)
+    a_q, v_q = burg_ar(_bridge(r_q, keep), AR_ORDER_MAX[0])
+    a_u, v_u = burg_ar(r_u, AR_ORDER_MAX[1])
     return (a_q, math.sqrt(max(v_q, 1e-300))), (a_u, math.sqrt(max(v_u, 1e-300)))
 
 
@@ -422,7 +552,8 @@ def _bridge(r, keep):
 def identify_output_error(t, q, q_m, u, *, fs_hz: float, measured=None, controller=None,
                           band_hz: float | None = None, trim_s: float = 1.0,
                           friction_scales=FRICTION_SCALES, x0=None, max_nfev: int = 40,
-                          link_band_fraction: float = LINK_BAND_FRACTION) -> OutputErrorResult:
+                          link_band_fraction: float = LINK_BAND_FRACTION, test_cubic: bool = True,
+                          test_hysteresis: bool = True) -> OutputErrorResult:
     """Identify I, mglx, mgly, c, v, J, b, k (and the mocap zero z) by output error (module
     docstring).
 
@@ -456,9 +587,10 @@ def identify_output_error(t, q, q_m, u, *, fs_hz: float, measured=None, controll
     if measured.shape != t.shape:
         raise InputError(None, "measured", f"a (T,) = {t.shape} bool mask", measured.shape)
     trim = int(round(trim_s * fs_hz))
-    if t.size < 2 * trim + int(5 * fs_hz):
-        raise InputError(None, "t", f"at least {2 * trim_s + 5:.0f} s of signals for output-error identification",
-                         f"{t.size / fs_hz:.2f} s")
+    need = 2 * trim + int(5 * fs_hz)
+    if t.size < need:
+        raise InputError(None, "t", f"at least {need} samples ({need / fs_hz:.1f} s) for output error (the trims and "
+                         "5 s to compare)", f"{t.size} samples ({t.size / fs_hz:.2f} s)", hint="record longer")
     if controller is None:
         t_c, q_m_c, u_c, fs_c = t, q_m, u, fs_hz
     else:
@@ -475,9 +607,10 @@ def identify_output_error(t, q, q_m, u, *, fs_hz: float, measured=None, controll
     f_max = min(0.4 * fs_c, 60.0, max(f_eiv, band0))
     u_rms = float(np.sqrt(np.mean(u ** 2)))
     v_rms = max(float(np.std(np.gradient(q_m_c) * fs_c)), 1e-9)
+    d_ref = max(u_rms / x[7], 1e-9)                     # a deflection's size, rad
     scale = np.array([x[0], 1e-3 * u_rms, 1e-3 * u_rms, 1e-3 * u_rms, 1e-3 * u_rms / v_rms, x[5],
-                      1e-3 * u_rms / v_rms, x[7], 1e-6, 1e-3])
-    x = np.concatenate([x, [0.0]])
+                      1e-3 * u_rms / v_rms, x[7], 1e-6, 1e-3, 1e-3 * x[7] / d_ref ** 2])
+    x = np.concatenate([x, [0.0, 0.0]])
     nfev = 0
     datas = {}
 
@@ -486,55 +619,59 @@ def identify_output_error(t, q, q_m, u, *, fs_hz: float, measured=None, controll
             datas[b_hz] = _Data(t_c, q_m_c, u_c, fs_c, t, q, measured, trim_s, b_hz)
         return datas[b_hz]
 
-    def fit(b_hz, law, x_start, noise=None, budget=max_nfev, coarse=False):
+    def fit(b_hz, law, x_start, noise=None, budget=max_nfev, coarse=False, cubic=False, search=False):
         """One fit in band b_hz under `law`. noise None: weighted by the residuals' SDs (no
         whitening); "white": that, then whitened by the residuals' autoregressive models; or the
-        given models. coarse: a 3x coarser simulation (for the searches before the final fit)."""
+        given models. coarse or search: a 3x coarser simulation and a looser tolerance (the
+        searches before the final fit)."""
         nonlocal nfev
-        prob = _Problem(data_at(b_hz), law, scale, max_phase=0.15 if coarse else 0.05)
+        prob = _Problem(data_at(b_hz), law, scale, max_phase=0.15 if coarse or search else 0.05, cubic=cubic)
+        ftol = 1e-6 if coarse or search else 1e-10
         if noise is None or noise == "white":
             r_q, r_u = prob.raw(x_start)
             prob.set_noise(((np.array([1.0]), max(float(np.std(r_q)), 1e-12)),
                             (np.array([1.0]), max(float(np.std(r_u)), 1e-12))))
             if noise is None:
-                xs, cost, n = _solve(prob, x_start, budget)
+                xs, cost, n = _solve(prob, x_start, budget, ftol)
                 nfev += n
                 return prob, xs, cost
-            x_start, _, n = _solve(prob, x_start, budget)
+            x_start, _, n = _solve(prob, x_start, budget, ftol)
             nfev += n
             noise = _noise_models(prob, x_start)
         prob.set_noise(noise)
-        xs, cost, n = _solve(prob, x_start, budget)
+        tic = time.perf_counter()
+        xs, cost, n = _solve(prob, x_start, budget, ftol)
         nfev += n
         if _DEBUG:
-            print(f"  fit band {b_hz:.2f} {law} cost {cost:.1f} n {n}", " ".join(f"{v:.4g}" for v in xs))
+            print(f"  fit band {b_hz:.2f} {law} {'search' if search else ('coarse' if coarse else 'fine')} "
+                  f"cost {cost:.1f} n {n} {time.perf_counter() - tic:.2f}s", " ".join(f"{v:.4g}" for v in xs))
         return prob, xs, cost
 
     # 1. the split of the total inertia I + J: the cost in the excitation's band can have a second
     #    minimum at a light, stiff link; short fits from several splits, the best kept
     b0 = min(band0, f_max) if band_hz is None else float(band_hz)
     A = x[_IDX["I"]] + x[_IDX["J"]]
-    prob0, _, _ = fit(b0, "sign", x, None, 1, coarse=True)
+    prob0, _, _ = fit(b0, "sign", x, None, 1, search=True)
     noise0 = ((prob0.a_q, prob0.s_q), (prob0.a_u, prob0.s_u))
     best = None
     for frac in (None, 0.1, 0.3, 0.5, 0.7, 0.9):
         xs = x.copy()
         if frac is not None:
             xs[_IDX["I"]], xs[_IDX["J"]] = frac * A, (1 - frac) * A
-        _, xs, c = fit(b0, "sign", xs, noise0, 8, coarse=True)
+        _, xs, c = fit(b0, "sign", xs, noise0, 8, search=True)
         if best is None or c < best[0]:
             best = (c, xs)
     x = best[1]
     # 2. the Coulomb law in that band: sign with sticking, or tanh with eps fitted from the best
     #    of a few starting values
-    prob_s, x_s, cost_s = fit(b0, "sign", x, None, 25, coarse=True)
+    prob_s, x_s, cost_s = fit(b0, "sign", x, None, 25, search=True)
     noise0 = ((prob_s.a_q, prob_s.s_q), (prob_s.a_u, prob_s.s_u))
     tanh_fits = []
     for e in friction_scales:
         xe = x_s.copy()
         xe[_IDX["eps"]] = float(np.clip(e * v_rms, *EPS_RANGE_RAD_S))
-        tanh_fits.append(fit(b0, "tanh", xe, noise0, 6, coarse=True))
-    prob_t, x_t, cost_t = fit(b0, "tanh", min(tanh_fits, key=lambda f: f[2])[1], noise0, 25, coarse=True)
+        tanh_fits.append(fit(b0, "tanh", xe, noise0, 6, search=True))
+    prob_t, x_t, cost_t = fit(b0, "tanh", min(tanh_fits, key=lambda f: f[2])[1], noise0, 25, search=True)
     scores = {0.0: cost_s, float(x_t[_IDX["eps"]]): cost_t}
     law, x = ("tanh", x_t) if cost_t < cost_s - 2.0 else ("sign", x_s)
     # 3. the band widened with it, in steps of 3, up to a fraction of the link's resonance (above
@@ -548,10 +685,40 @@ def identify_output_error(t, q, q_m, u, *, fs_hz: float, measured=None, controll
             if target <= band * 1.05:
                 break
             band = min(target, 3.0 * band)
-            _, x, _ = fit(band, law, x, None, 25, coarse=True)
-    # 4. the final fit: whitened, and once more with the noise models of its residuals
+            _, x, _ = fit(band, law, x, None, 25, search=True)
+    # 4. the final fit, whitened by the noise models of the last residuals; then a look at the
+    #    inertia split from either side (the cost can have a second minimum there)
     prob, x, cost = fit(band, law, x, "white")
-    prob, x, cost = fit(band, law, x, _noise_models(prob, x))
+    noise = (prob.a_q, prob.s_q), (prob.a_u, prob.s_u)
+    A = x[_IDX["I"]] + x[_IDX["J"]]
+    found = [(cost, x, prob)]
+    for frac in (0.6, 1.5):
+        xs = x.copy()
+        xs[_IDX["I"]] = min(frac * x[_IDX["I"]], 0.97 * A)
+        xs[_IDX["J"]] = A - xs[_IDX["I"]]
+        _, xs, c = fit(band, law, xs, noise, 10, coarse=True)
+        if c < cost + AMBIGUITY_CHI2:
+            p2, xs, c = fit(band, law, xs, noise, 25)
+            found.append((c, xs, p2))
+    cost, x, prob = min(found, key=lambda f: f[0])
+    others = [(c - cost, xs) for c, xs, _ in found
+              if c - cost < AMBIGUITY_CHI2 and np.abs(xs[_IDX["I"]] - x[_IDX["I"]]) > 1e-6 * A]
+    # 5. a stiffening (or softening) spring: k delta + k3 delta^3, kept when the data want it by far
+    #    (a likelihood ratio of CUBIC_CHI2) and it changes the stiffness by CUBIC_MIN_PCT over the
+    #    deflections the recording reaches
+    if test_cubic:
+        x3 = x.copy()
+        x3[_IDX["k3"]] = 0.3 * x[_IDX["k"]] / (3.0 * float(np.percentile(np.abs(q_m_c - prob.simulate(x)[0]), 95)) ** 2)
+        pc, xc, cc = fit(band, law, x3, noise, 25, cubic=True)       # from 30 % stiffening: the
+        #                                                          k3 column is tiny near zero
+        d95 = float(np.percentile(np.abs(q_m_c - pc.simulate(xc)[0]), 95))
+        change = 300.0 * xc[_IDX["k3"]] * d95 ** 2 / xc[_IDX["k"]]
+        if _DEBUG:
+            print(f"cubic test: chi2 {cost - cc:.1f} change {change:.1f} % k3 {xc[_IDX['k3']]:.4g} d95 {d95:.3g}")
+        if cost - cc > CUBIC_CHI2 and abs(change) > CUBIC_MIN_PCT:
+            prob, x, cost = pc, xc, cc
+            others = []
+    hysteresis = _hysteresis_test(prob, x) if test_hysteresis else None
     data = datas[band]
     eps = float(x[_IDX["eps"]])
     r = prob.fun(x[prob.free])
@@ -562,6 +729,7 @@ def identify_output_error(t, q, q_m, u, *, fs_hz: float, measured=None, controll
     lo, _ = _bounds()
     at_bound = tuple(n for n in ("c", "v", "b") if x[_IDX[n]] <= lo[_IDX[n]] + 1e-6 * scale[_IDX[n]])
     free = prob.free & np.array([n not in at_bound for n in OE_NAMES])
+    free &= np.linalg.norm(Jm, axis=0) > 0          # eps of a tanh law stiffer than the step: a sign law
     Jf = Jm[:, free]
     sc = np.linalg.norm(Jf, axis=0)
     sc[sc == 0] = 1.0
@@ -573,6 +741,22 @@ def identify_output_error(t, q, q_m, u, *, fs_hz: float, measured=None, controll
     cov_model[np.ix_(free, free)] = inv * max(s2, 1.0)
     cov_sand[np.ix_(free, free)] = sandwich_cov(Jf, r, time_index=prob.time_index())
     var = np.fmax(np.diag(cov_model), np.diag(cov_sand))
+    # a second minimum of nearly the same cost: the curvature at one of them understates what the
+    # data leave open; the SD covers the other as a quadratic profile through both would
+    for d_cost, xs in others:
+        gap = (xs - x) ** 2 / max(d_cost, 1.0)
+        var = np.where(free, np.fmax(var, gap), var)
+    # the motor angle's own noise drives the simulated link (its resonance, through the friction):
+    # the shift that twice that noise would cause is measured, removed once (a first-order
+    # simulation-extrapolation, Cook and Stefanski 1994) and counted in the SD
+    encoder_shift = _encoder_noise_shift(q_m_c, fs_c, u_c, t_c, t, q, measured, trim_s, band, law, scale, prob, x, free)
+    if encoder_shift is not None:
+        sig = np.abs(encoder_shift) > ENCODER_SHIFT_SDS * np.sqrt(var)
+        if sig[free].any():
+            x = np.where(free, x - encoder_shift, x)
+            var = np.where(free, var + encoder_shift ** 2, var)
+        else:
+            encoder_shift = None
     with np.errstate(invalid="ignore", divide="ignore"):
         d = np.sqrt(var / np.diag(cov_model))
         cov = cov_model * np.outer(d, d)
@@ -591,9 +775,16 @@ def identify_output_error(t, q, q_m, u, *, fs_hz: float, measured=None, controll
     q_s = np.interp(t, t_c, q_s_c)
     qd_m, qdd_m = derivatives(q_m, fs_hz)
     tau_s_motor = lowpass(u - x[_IDX["J"]] * qdd_m - x[_IDX["b"]] * qd_m, fs_hz, fc)[inner]
+    d_sim = q_m - q_s
+    tau_model = lowpass(x[_IDX["k"]] * d_sim + x[_IDX["k3"]] * d_sim ** 3, fs_hz, fc)[inner]
+    res = tau_s_motor - tau_model
+    res -= res.mean()
+    dev = tau_s_motor - tau_s_motor.mean()
+    spring_r2 = float(1.0 - (res @ res) / (dev @ dev)) if dev @ dev > 0 else float("nan")
     return OutputErrorResult(fit=fit_ls, cov_model=cov_model, cov_sandwich=cov_sand, at_bound=at_bound,
                              friction_scale=eps, band_hz=float(data.band), sigma_q=float(np.std(r_q)),
                              sigma_u=float(np.std(r_u)), ar_q=prob.a_q, ar_u=prob.a_u, t=t[inner],
                              delta_sim=(q_m - q_s)[inner], tau_s=x[_IDX["k"]] * (q_m - q_s)[inner],
                              delta_mocap=lowpass(q_m - (q - x[_IDX["z"]]), fs_hz, fc)[inner],
-                             tau_s_motor=tau_s_motor, scores=scores, n_iter=nfev)
+                             tau_s_motor=tau_s_motor, scores=scores, n_iter=nfev, hysteresis=hysteresis,
+                             spring_r2=spring_r2)
