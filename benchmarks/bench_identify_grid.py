@@ -46,21 +46,16 @@ sys.path.insert(0, str(ROOT))
 def estimate(bundle_dir: Path, out_dir: Path, method: str) -> dict[str, dict]:
     """ADAPTER between this benchmark and the identification API: one recording bundle in, its
     joint's parameters out, {name: {"value": float, "std": float, "determined": bool,
-    "reason": str | None}} in SI units. Rewrite this function (only) when the API changes."""
-    try:
-        from mocapfj.pipeline import identify_recording
-    except ImportError:                     # not in this version: the files-level identify
-        identify_recording = None
-    if identify_recording is not None:
-        res = identify_recording(bundle_dir, out_dir, method=method)[0]
-        return {n: {"value": float(v), "std": float(s), "determined": True, "reason": None}
-                for n, (v, s) in res["values"].items()}
-    from mocapfj.pipeline import run_identify
+    "reason": str | None}} in SI units, plus "_spring": the spring model chosen. Rewrite this
+    function (only) when the API changes."""
+    import mocapfj
 
-    params = run_identify([bundle_dir], out_dir, method=method)["joints"][0]["params"]
-    return {n: {"value": float(p["value"]), "std": float(p["std"]) if p.get("std") is not None else float("nan"),
-                "determined": bool(p.get("determined", True)), "reason": p.get("reason")}
-            for n, p in params.items()}
+    joint = mocapfj.identify(str(bundle_dir), method=method).to_dict()["joints"][0]
+    out = {n: {"value": float(p["value"]), "std": float(p["std"]) if p.get("std") is not None else float("nan"),
+               "determined": bool(p.get("determined", True)), "reason": p.get("reason")}
+           for n, p in joint["params"].items()}
+    out["_spring"] = joint["spring"]["model"]
+    return out
 # --------------------------------------------------------------------------------------------------
 
 
@@ -233,6 +228,10 @@ def summarize(method: str, rows: list[dict]) -> list[str]:
         lines.append(f"| {r['name']} | {r['truth']['family']} | {params} | {setting} | " + " | ".join(cells) + " |")
     if fails:
         lines += ["", "Failures:", ""] + [f"- {r['name']}: {r['result']['error']}" for r in fails]
+    springs = [r["result"]["estimates"].get("_spring") for r in rows if r["result"]["estimates"]]
+    if springs:
+        counts = {m: springs.count(m) for m in dict.fromkeys(springs)}
+        lines += ["", "Spring model chosen: " + ", ".join(f"{m} {k}" for m, k in counts.items()) + "."]
     secs = np.array([r["result"]["seconds"] for r in rows])
     lines += ["", f"Estimation time per case: median {np.median(secs):.1f} s, max {secs.max():.1f} s.", ""]
     return lines
@@ -258,7 +257,10 @@ def main(argv=None) -> int:
     ap.add_argument("--base-seed", type=int, default=5000)
     ap.add_argument("--family", choices=("pa10", "cobot", "heavy", "vertical"), default=None,
                     help="restrict the grid to one family (default: the mixture)")
-    ap.add_argument("--methods", default="motor_first", help="comma-separated estimators (default motor_first)")
+    ap.add_argument("--methods", default="output_error", help="comma-separated estimators (default output_error)")
+    ap.add_argument("--spring", choices=("linear", "cubic", "bouc_wen"), default="linear",
+                    help="give every case this spring (mocapfj.synth.hinge.with_spring); the table then "
+                         "also counts the spring model each estimator chose")
     ap.add_argument("--jobs", type=int, default=2, help="worker processes (default 2)")
     ap.add_argument("--cache", type=Path, default=ROOT / "benchmarks" / ".cache" / "grid")
     ap.add_argument("--write-docs", type=Path, default=None, metavar="PATH",
@@ -266,10 +268,12 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
 
     from mocapfj.io import read_json, write_json
-    from mocapfj.synth.hinge import sample_cases
+    from mocapfj.synth.hinge import sample_cases, with_spring
 
     cases = sample_cases(args.n, args.base_seed, family=args.family)
-    root = args.cache / (str(args.base_seed) if args.family is None else f"{args.base_seed}_{args.family}")
+    cases = [with_spring(c, args.spring, seed=i) for i, c in enumerate(cases)]
+    root = args.cache / ("_".join([str(args.base_seed)] + ([args.family] if args.family else [])
+                                  + ([args.spring] if args.spring != "linear" else [])))
     dirs = [root / c.name for c in cases]
     tic = time.perf_counter()
     with ProcessPoolExecutor(args.jobs) as ex:

@@ -89,7 +89,7 @@ def _identify_recording(rec: Recording, method: str, cutoff_hz, decimate: int, c
 
     sig = signals(rec, calibration)
     gear = {j.name: j.gear_ratio for j in rec.joints}
-    if method == "motor_first" and _urdf_chain(rec):
+    if method in ("output_error", "motor_first") and _urdf_chain(rec):
         try:
             return identify_nlink_joints(rec.urdf, list(sig.values()), decimate=decimate, recording=rec.name,
                                          gear_ratios=[gear[n] for n in sig])
@@ -105,7 +105,7 @@ def _identify_recording(rec: Recording, method: str, cutoff_hz, decimate: int, c
     return out, None
 
 
-def identify(recordings: RecordingLike | Sequence[RecordingLike], *, method: str = "motor_first",
+def identify(recordings: RecordingLike | Sequence[RecordingLike], *, method: str = "output_error",
              cutoff_hz: float | None = None, decimate: int = 2, validation: RecordingLike | None = None,
              calibrations: Sequence | None = None):
     """Identify every joint of one or more recordings: an :class:`mocapfj.ident.Identification`.

@@ -260,9 +260,10 @@ def build_parser() -> argparse.ArgumentParser:
     idf = sub.add_parser("identify", help="identification of joint dynamics and spring model")
     idf.add_argument("recordings", nargs="+", help="recording bundles; repeats of the same joints give CV %%")
     idf.add_argument("--out", required=True, help="output directory")
-    idf.add_argument("--method", default="motor_first", choices=list(IDENTIFY_METHODS),
-                     help="motor_first (default: motor equation, then link equation) or two_step (Lightcap and "
-                          "Banks 2007)")
+    idf.add_argument("--method", default="output_error", choices=list(IDENTIFY_METHODS),
+                     help="output_error (default: the link simulated on the motor's motion, compared with the mocap "
+                          "angle and the torque), motor_first (motor equation, then link equation) or two_step "
+                          "(Lightcap and Banks 2007)")
     idf.add_argument("--cutoff", type=float, default=None,
                      help="two_step method: low-pass on the angles before differentiation, Hz (default 10)")
     idf.add_argument("--validation", default=None,

@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..dynamics import CoulombViscous, JointModel, LinearSpring
+from ..dynamics import CoulombViscous, CubicSpring, JointModel, LinearSpring
 from ..errors import InputError
 from ..types import JointSignals
 from .conditioning import derivatives, lowpass, white_noise_sd
@@ -69,7 +69,95 @@ def _model(name: str, gear_ratio: float, p: dict, spring: SpringResult, smoothin
                       b=p["b"], friction=CoulombViscous(c=p["c"], v=p["v"], smoothing=smoothing), spring=element)
 
 
-def identify_joint(t, q, q_m, u, *, fs_hz: float, method: str = "motor_first", cutoff_hz: float | None = None,
+def _motor_first_spring(t, q, q_m, u, fs_hz, decimate, models):
+    """Motor-first identification with its spring model chosen: a linear pass (which also tests
+    the motor equation for a hysteretic spring); without hysteresis the model is selected on the
+    (deflection, spring torque) pairs and, when it is not linear, the motor equation is solved
+    again with that shape and the spring refitted on the new pairs. (result, SpringResult)."""
+    from .motorfirst import identify_motor_first
+
+    mf = identify_motor_first(t, q, q_m, u, fs_hz=fs_hz, decimate=decimate)
+    if mf.hysteresis is not None and any(m in models for m in HYSTERETIC):
+        return mf, _hysteretic_spring(mf.hysteresis, mf.delta, mf.tau_s, mf.t, fs_hz)
+    elastic = tuple(m for m in models if m not in HYSTERETIC)
+    sel = select_spring_model(*spring_pairs(mf.delta, mf.tau_s, mf.t, fs_hz), models=elastic)
+    if sel.chosen.model != "linear":
+        mf = identify_motor_first(t, q, q_m, u, fs_hz=fs_hz, decimate=decimate, spring=sel.chosen.predict,
+                                  q_zero_rad=mf.q_zero_rad)
+        sel = select_spring_model(*spring_pairs(mf.delta, mf.tau_s, mf.t, fs_hz),
+                                  models=(sel.chosen.model, "linear"))
+    return mf, _selected(sel)
+
+
+def _motor_first_values(mf):
+    """(parameters, stages, torque RMS, q zero) of a motor-first result."""
+    values = {}
+    for n in PARAMETER_NAMES:
+        part = mf.link if n in mf.link.names else mf.motor
+        values[n] = Parameter(n, part[n], part.std_of(n))
+    return values, {"motor": mf.motor, "link": mf.link}, mf.motor.residual_rms, mf.q_zero_rad
+
+
+def _output_error_joint(t, q, q_m, u, fs_hz, decimate, models, measured, controller, cond):
+    """The output-error branch of :func:`identify_joint`: (parameters, spring, stages, torque RMS,
+    q zero, extra JSON, friction smoothing); adds its condition number to `cond`.
+
+    The spring: linear; cubic when the output error's own test keeps k3; hysteretic when its
+    score test finds a loop in the deflection (:func:`.output_error._hysteresis_test`). Motor-first
+    then fits the Bouc-Wen spring inside the motor equation, and when it finds it too its
+    parameters (spring shape included) are reported, since the output-error model has no such
+    spring; otherwise the linear fit's parameters stand and the spring is the test's.
+    """
+    from ..dynamics import BoucWen
+    from .determinacy import combinations, judge_parameters
+    from .motorfirst import identify_motor_first
+    from .output_error import identify_output_error
+
+    hysteretic = any(m in models for m in HYSTERETIC)
+    oe = identify_output_error(t, q, q_m, u, fs_hz=fs_hz, measured=measured, controller=controller,
+                               test_cubic="cubic" in models, test_hysteresis=hysteretic)
+    f = oe.fit
+    if oe.hysteresis is not None and hysteretic:
+        try:
+            mf = identify_motor_first(t, q, q_m, u, fs_hz=fs_hz, decimate=decimate)
+        except InputError:
+            mf = None
+        if mf is not None and mf.hysteresis is not None:
+            spring = _hysteretic_spring(mf.hysteresis, mf.delta, mf.tau_s, mf.t, fs_hz)
+            values, stages, torque_rms, q_zero = _motor_first_values(mf)
+            cond.update(cond_motor=mf.motor.cond, cond_link=mf.link.cond)
+            extra = {"parameters_from": "motor_first: a hysteretic spring, found by the output error's score "
+                                        "test and fitted in the motor equation, which the output-error model lacks"}
+            return values, spring, stages, torque_rms, q_zero, extra, 0.0
+    qd, qdd = derivatives(lowpass(np.asarray(q_m, float), fs_hz, min(oe.band_hz, 0.4 * fs_hz)), fs_hz)
+    context = {"sigma_q_rad": white_noise_sd(np.asarray(q, float), fs_hz), "band_hz": oe.band_hz,
+               "deflection_viscous_rad": float(np.std(f["v"] * qd) / f["k"]),
+               "deflection_inertial_rad": float(np.std(f["I"] * qdd) / f["k"])}
+    values = judge_parameters(f.names, f.values, f.std, f.cov, duration_s=float(t[-1] - t[0]), context=context,
+                              at_bound=oe.at_bound)
+    extra = {"combinations": {k: {"value": v, "std": sd} for k, (v, sd) in
+                              combinations(f.names, f.values, f.cov).items()},
+             "friction_law": {"law": "tanh" if oe.friction_scale > 0 else "sign", "eps_rad_s": oe.friction_scale},
+             "band_hz": oe.band_hz, "residual_sd": {"q_rad": oe.sigma_q, "u_Nm": oe.sigma_u}}
+    if oe.hysteresis is not None and hysteretic:
+        h = oe.hysteresis
+        spring = SpringResult(model="bouc_wen", params={"k": f["k"], "alpha": h["alpha"], "beta": h["beta"],
+                                                        "gamma": h["gamma"], "chi2": h["chi2"]},
+                              element=BoucWen(k=f["k"], alpha=h["alpha"], beta=h["beta"], gamma=h["gamma"]),
+                              r2=oe.spring_r2)
+        extra["spring_note"] = ("hysteretic by the output error's score test (motor-first could not fit it): the "
+                                "other parameters are the linear-spring fit's, k its small-deflection stiffness")
+    elif f["k3"] != 0.0:
+        spring = SpringResult(model="cubic", params={"k1": f["k"], "k3": f["k3"], "k3_std": f.std_of("k3")},
+                              element=CubicSpring(k1=f["k"], k3=f["k3"]), r2=oe.spring_r2)
+    else:
+        spring = SpringResult(model="linear", params={"k": f["k"], "tau0": f["k"] * f["z"]},
+                              element=LinearSpring(k=f["k"]), r2=oe.spring_r2)
+    cond["cond_output_error"] = f.cond
+    return values, spring, {"output_error": f}, f.residual_rms, f["z"], extra, oe.friction_scale
+
+
+def identify_joint(t, q, q_m, u, *, fs_hz: float, method: str = "output_error", cutoff_hz: float | None = None,
                    decimate: int = 2, spring_models=None, name: str = "", gear_ratio: float = 1.0,
                    frames_filled: int = 0, recording: str = "", measured=None, controller=None) -> IdentifiedJoint:
     """Identify one joint from its signals on one clock (docs/identification.md).
@@ -94,46 +182,26 @@ def identify_joint(t, q, q_m, u, *, fs_hz: float, method: str = "motor_first", c
     controller : (t_c, q_m_c, u_c, fs_c_hz), optional
         The controller's own samples over the same span (output error compares the torque there).
     """
-    from .motorfirst import identify_motor_first
     from .twostep import identify_two_step
 
     if method not in IDENTIFY_METHODS:
         raise InputError(None, "method", f"one of {list(IDENTIFY_METHODS)}", repr(method))
     extra, smoothing = {}, 0.0
-    two = identify_two_step(t, q, q_m, u, fs_hz=fs_hz, cutoff_hz=10.0 if cutoff_hz is None else cutoff_hz,
-                            decimate=decimate)
-    cond = {"cond_two_step": two.cond_two_step, "cond_one_step": two.cond_one_step}
+    try:
+        two = identify_two_step(t, q, q_m, u, fs_hz=fs_hz, cutoff_hz=10.0 if cutoff_hz is None else cutoff_hz,
+                                decimate=decimate)
+        cond = {"cond_two_step": two.cond_two_step, "cond_one_step": two.cond_one_step}
+    except InputError:
+        if method == "two_step":
+            raise
+        two, cond = None, {}            # reported for comparison only; this recording cannot run it
     models = tuple(spring_models or SPRING_FITTERS)
     unknown = [m for m in models if m not in SPRING_FITTERS]
     if unknown:
         raise InputError(None, "spring_models", f"names from {sorted(SPRING_FITTERS)}", unknown)
     if method == "output_error":
-        from .determinacy import combinations, judge_parameters
-        from .output_error import identify_output_error
-
-        oe = identify_output_error(t, q, q_m, u, fs_hz=fs_hz, measured=measured, controller=controller)
-        f = oe.fit
-        qd, qdd = derivatives(lowpass(np.asarray(q_m, float), fs_hz, min(oe.band_hz, 0.4 * fs_hz)), fs_hz)
-        context = {"sigma_q_rad": white_noise_sd(np.asarray(q, float), fs_hz), "band_hz": oe.band_hz,
-                   "deflection_viscous_rad": float(np.std(f["v"] * qd) / f["k"]),
-                   "deflection_inertial_rad": float(np.std(f["I"] * qdd) / f["k"])}
-        values = judge_parameters(f.names, f.values, f.std, f.cov, duration_s=float(t[-1] - t[0]), context=context,
-                                  at_bound=oe.at_bound)
-        sel = select_spring_model(*spring_pairs(oe.delta_mocap, oe.tau_s_motor, oe.t, fs_hz,
-                                                cutoff_hz=min(10.0, oe.band_hz)),
-                                  models=tuple(m for m in models if m not in HYSTERETIC))
-        spring = _selected(sel)
-        if spring.model == "linear":             # the pairs carry the mocap noise: k is the fit's
-            spring = SpringResult(model="linear", params={"k": f["k"], "tau0": f["k"] * f["z"]},
-                                  element=LinearSpring(k=f["k"]), r2=spring.r2, holdout_rms_Nm=spring.holdout_rms_Nm)
-        stages = {"output_error": f}
-        cond["cond_output_error"] = f.cond
-        torque_rms, q_zero = f.residual_rms, f["z"]
-        extra = {"combinations": {k: {"value": v, "std": sd} for k, (v, sd) in
-                                  combinations(f.names, f.values, f.cov).items()},
-                 "friction_law": {"law": "tanh" if oe.friction_scale > 0 else "sign", "eps_rad_s": oe.friction_scale},
-                 "band_hz": oe.band_hz, "residual_sd": {"q_rad": oe.sigma_q, "u_Nm": oe.sigma_u}}
-        smoothing = oe.friction_scale
+        values, spring, stages, torque_rms, q_zero, extra, smoothing = _output_error_joint(
+            t, q, q_m, u, fs_hz, decimate, models, measured, controller, cond)
     elif method == "two_step":
         values = {n: Parameter(n, two.step1[n], two.step1.std_of(n)) for n in PARAMETER_NAMES if n != "k"}
         values["k"] = Parameter("k", two.spring["k"], two.spring.std_of("k"))
@@ -141,32 +209,13 @@ def identify_joint(t, q, q_m, u, *, fs_hz: float, method: str = "motor_first", c
         stages = {"step1": two.step1, "spring": two.spring, "one_step": two.one_step}
         torque_rms, q_zero = two.torque_rms, two.q_zero_rad
     else:
-        # a linear pass (which also tests the motor equation for a hysteretic spring); without
-        # hysteresis the spring model is selected on its pairs and, when it is not linear, the motor
-        # equation is solved again with that shape and the spring refitted on the new pairs
-        mf = identify_motor_first(t, q, q_m, u, fs_hz=fs_hz, decimate=decimate)
-        if mf.hysteresis is not None:
-            spring = _hysteretic_spring(mf.hysteresis, mf.delta, mf.tau_s, mf.t, fs_hz)
-        else:
-            sel = select_spring_model(*spring_pairs(mf.delta, mf.tau_s, mf.t, fs_hz),
-                                      models=tuple(m for m in models if m not in HYSTERETIC))
-            if sel.chosen.model != "linear":
-                mf = identify_motor_first(t, q, q_m, u, fs_hz=fs_hz, decimate=decimate, spring=sel.chosen.predict,
-                                          q_zero_rad=mf.q_zero_rad)
-                sel = select_spring_model(*spring_pairs(mf.delta, mf.tau_s, mf.t, fs_hz),
-                                          models=(sel.chosen.model, "linear"))
-            spring = _selected(sel)
-        values = {}
-        for n in PARAMETER_NAMES:
-            part = mf.link if n in mf.link.names else mf.motor
-            values[n] = Parameter(n, part[n], part.std_of(n))
-        stages = {"motor": mf.motor, "link": mf.link}
+        mf, spring = _motor_first_spring(t, q, q_m, u, fs_hz, decimate, models)
+        values, stages, torque_rms, q_zero = _motor_first_values(mf)
         cond.update(cond_motor=mf.motor.cond, cond_link=mf.link.cond)
-        torque_rms, q_zero = mf.motor.residual_rms, mf.q_zero_rad
     p = {n: v.value for n, v in values.items()}
     return IdentifiedJoint(name=name, method=method, params=values, model=_model(name, gear_ratio, p, spring, smoothing),
                            spring=spring, stages=stages, cond=cond, torque_rms=float(torque_rms),
-                           q_zero_rad=float(q_zero), k_one_step=float(two.one_step["k"]),
+                           q_zero_rad=float(q_zero), k_one_step=None if two is None else float(two.one_step["k"]),
                            frames_filled=int(frames_filled), recording=recording, extra=extra)
 
 

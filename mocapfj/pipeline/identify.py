@@ -40,7 +40,7 @@ def write_tables(summary: dict, out: Path) -> None:
     write_text_atomic(out / "table.csv", "\n".join(csv_lines) + "\n")
 
 
-def run_identify(recordings, out: str | Path, method: str = "motor_first", cutoff_hz: float | None = None,
+def run_identify(recordings, out: str | Path, method: str = "output_error", cutoff_hz: float | None = None,
                  decimate: int = 2, validation=None) -> dict:
     """``mocapfj identify``: identify every joint of one or more recordings; repeats give CV %.
 

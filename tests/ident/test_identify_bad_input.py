@@ -65,13 +65,17 @@ def test_nan_in_the_controller_log_is_refused_with_its_time(short):
 
 
 def test_a_recording_too_short_for_the_filters_is_named(short):
-    """3 s: the 1 s trims and the 2 Hz split filter need 4 s at 250 Hz."""
+    """3 s: output error needs its 1 s trims and 5 s to compare (7 s at 250 Hz); motor-first
+    needs the trims and its 2 Hz split filter (4 s)."""
     rec, d = short
     s = joint_signals(d, rec.controller, "j2")
     n = int(3.0 * 250)
-    with pytest.raises(InputError, match=r"t: expected at least 1000 samples \(4\.0 s\) for the filters and the trim, "
+    with pytest.raises(InputError, match=r"t: expected at least 1750 samples \(7\.0 s\) for output error .*"
                                          r"got 750 samples \(3\.00 s\)"):
         identify_joint(s.t[:n], s.q[:n], s.q_m[:n], s.u[:n], fs_hz=250.0)
+    with pytest.raises(InputError, match=r"t: expected at least 1000 samples \(4\.0 s\) for the filters and the trim, "
+                                         r"got 750 samples \(3\.00 s\)"):
+        identify_joint(s.t[:n], s.q[:n], s.q_m[:n], s.u[:n], fs_hz=250.0, method="motor_first")
 
 
 def test_signals_of_different_lengths_and_no_excitation_are_named():
@@ -79,6 +83,9 @@ def test_signals_of_different_lengths_and_no_excitation_are_named():
     q = 0.3 * np.sin(2 * np.pi * 0.2 * t)
     with pytest.raises(InputError, match=r"t, q, q_m, u: expected four \(T,\) arrays"):
         identify_joint(t, q[:-3], q, q, fs_hz=250.0)
-    # the motor stands still: the motor equation cannot see J and b
-    with pytest.raises(InputError, match=r"no independent excitation of \[.*'J'.*\]"):
+    # the motor stands still: nothing moves the joint's inertia (output error), the motor equation
+    # cannot see J and b (motor-first)
+    with pytest.raises(InputError, match=r"no independent excitation of \[.*'I \+ J'.*\]"):
         identify_joint(t, q, np.zeros_like(q), np.zeros_like(q), fs_hz=250.0)
+    with pytest.raises(InputError, match=r"no independent excitation of \[.*'J'.*\]"):
+        identify_joint(t, q, np.zeros_like(q), np.zeros_like(q), fs_hz=250.0, method="motor_first")

@@ -37,7 +37,7 @@ def test_identify_json_table_and_cv(three_trials, capsys):
     assert main(["identify", *map(str, paths), "--out", str(root / "out"), "--json"]) == 0
     s = json.loads(capsys.readouterr().out)
     (j,) = s["joints"]
-    assert j["name"] == "j2" and j["n_trials"] == 3 and j["method"] == "motor_first"
+    assert j["name"] == "j2" and j["n_trials"] == 3 and j["method"] == "output_error"
     assert set(j["params"]) == set(TABLE1_J2) and {"value", "std", "rel_std_pct"} <= set(j["params"]["I"])
     assert {"cond_two_step", "cond_one_step", "torque_rms", "spring", "cv_pct", "frames_filled"} <= set(j)
     assert {"model", "params", "r2"} <= set(j["spring"])
