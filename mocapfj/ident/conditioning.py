@@ -11,7 +11,7 @@ from scipy import signal
 from ..errors import InputError
 from ..types import ControllerLog, Deflection, JointSignals
 
-__all__ = ["lowpass", "derivatives", "decimate_parallel", "resample_to", "complementary", "white_noise_sd", "noise_floor_sd",
+__all__ = ["lowpass", "derivatives", "decimate_parallel", "resample_to", "complementary", "white_noise_sd", "noise_floor_sd", "longest_gap", "gap_error", "MAX_GAP_S", "MAX_GAP_OUTPUT_ERROR_S",
            "noise_gain", "controller_on", "controller_span", "check_signals", "joint_signals"]
 
 
@@ -153,13 +153,42 @@ def check_signals(t, q, q_m, u, fs_hz: float):
     return t, q, q_m, u
 
 
+MAX_GAP_S = 0.1
+"""The longest gap in the link angle the equation-error methods accept (filled by interpolation,
+whose straight line they would differentiate), s."""
+MAX_GAP_OUTPUT_ERROR_S = 2.0
+"""The longest gap output error accepts: it simulates the link through the gap and leaves the
+gap's samples out, so a gap costs only its samples; beyond this the link's start after the gap
+is no longer tied to the data before it, s."""
+
+
+def longest_gap(t: np.ndarray, measured: np.ndarray) -> tuple[float, float]:
+    """(length s, start time s) of the longest run of unmeasured samples (0, nan without one)."""
+    bad = ~np.asarray(measured, bool)
+    if not bad.any():
+        return 0.0, float("nan")
+    edges = np.diff(np.concatenate([[0], bad.astype(np.int8), [0]]))
+    starts, stops = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)
+    dt = float(np.median(np.diff(t)))
+    i = int(np.argmax(stops - starts))
+    return float((stops[i] - starts[i] + 1) * dt), float(t[starts[i]])
+
+
+def gap_error(source, joint: str, gap: float, t0: float, max_gap_s: float, why: str = "") -> InputError:
+    """The refusal of a gap longer than max_gap_s, naming where it is."""
+    return InputError(source, f"joints[{joint}] link angle", f"gaps in the link angle of at most {max_gap_s:g} s{why}",
+                      f"{gap:.3f} s without an angle from t = {t0:.3f} s",
+                      hint="cut the trial around the gap, or check the markers' visibility there")
+
+
 def joint_signals(d: Deflection, controller: ControllerLog, joint: str, *, min_valid: float = 0.95,
-                  max_gap_s: float = 0.1, source=None) -> JointSignals:
+                  max_gap_s: float = MAX_GAP_OUTPUT_ERROR_S, source=None) -> JointSignals:
     """A joint's link angle and its controller signals on one clock, for identification.
 
     `d` is the joint's deflection from the joints stage (mocap samples on the controller clock,
     link angle zero aligned to the motor's). Gaps in the link angle of up to `max_gap_s` are filled
-    by linear interpolation (`n_filled`: a counted repair); the logged motor angle and torque are
+    by linear interpolation (`n_filled`: a counted repair, and `measured` False there; the
+    equation-error methods refuse gaps over :data:`MAX_GAP_S`, output error leaves them out); the logged motor angle and torque are
     low-passed (zero phase, 100 Hz or 0.45 x their rate) and interpolated at the mocap samples;
     samples outside the controller log are dropped. A longer gap, less than `min_valid` of the
     frames with an angle, or a NaN in the controller log is refused with the time it happens:
@@ -172,16 +201,9 @@ def joint_signals(d: Deflection, controller: ControllerLog, joint: str, *, min_v
         raise InputError(source, f"joints[{joint}] link angle",
                          f"a link angle in at least {100 * min_valid:.0f} % of the frames", f"{100 * ok.mean():.1f} %",
                          hint="check the markers' visibility")
-    if not ok.all():
-        edges = np.diff(np.concatenate([[0], (~ok).astype(np.int8), [0]]))
-        starts, stops = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)
-        dt = float(np.median(np.diff(t)))
-        longest = int(np.argmax(stops - starts))
-        gap = (stops[longest] - starts[longest] + 1) * dt
-        if gap > max_gap_s:
-            raise InputError(source, f"joints[{joint}] link angle", f"gaps in the link angle of at most {max_gap_s:g} s",
-                             f"{gap:.3f} s without an angle from t = {t[starts[longest]]:.3f} s",
-                             hint="cut the trial around the gap, or check the markers' visibility there")
+    gap, t_gap = longest_gap(t, ok)
+    if gap > max_gap_s:
+        raise gap_error(source, joint, gap, t_gap, max_gap_s)
     q = np.interp(t, t[ok], q[ok])
     j = controller.joint_names.index(joint)
     for name, x in (("q_m", controller.q_m[:, j]), ("tau", controller.tau[:, j])):

@@ -195,6 +195,13 @@ def identify_joint(t, q, q_m, u, *, fs_hz: float, method: str = "output_error", 
         if method == "two_step":
             raise
         two, cond = None, {}            # reported for comparison only; this recording cannot run it
+    if method != "output_error" and measured is not None:
+        from .conditioning import MAX_GAP_S, gap_error, longest_gap
+
+        gap, t_gap = longest_gap(t, measured)
+        if gap > MAX_GAP_S:
+            raise gap_error(recording or None, name, gap, t_gap, MAX_GAP_S,
+                            f" for {method}, which differentiates the filled angle (output error accepts longer ones)")
     models = tuple(spring_models or SPRING_FITTERS)
     unknown = [m for m in models if m not in SPRING_FITTERS]
     if unknown:

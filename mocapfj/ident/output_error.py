@@ -49,6 +49,7 @@ larger of the two.
 from __future__ import annotations
 
 import math
+import os
 import time
 from dataclasses import dataclass
 
@@ -62,7 +63,7 @@ from .conditioning import check_signals, derivatives, lowpass
 from .ls import sandwich_cov
 
 __all__ = ["OE_NAMES", "FRICTION_SCALES", "OutputErrorResult", "identify_output_error",
-           "excitation_bandwidth_hz", "burg_ar", "eiv_band_hz",
+           "excitation_bandwidth_hz", "burg_ar", "eiv_band_hz", "wiener_drive",
            "encoder_band_hz"]
 
 OE_NAMES = ("I", "mglx", "mgly", "c", "v", "J", "b", "k", "z", "eps", "k3")
@@ -83,13 +84,16 @@ CUBIC_MIN_PCT = 5.0
 """...and change the stiffness by this many percent at the 95th percentile of the deflection."""
 ENCODER_SHIFT_SDS = 2.0
 """The motor-angle noise's measured shift is removed when it exceeds this many SDs in some parameter."""
+ENCODER_REFIT_SDS = 0.5
+"""...measured by a refit when its Gauss-Newton estimate exceeds this many SDs."""
 AMBIGUITY_CHI2 = 25.0
 """A second minimum within this much of the best's (whitened) cost widens the SDs: a quadratic
 profile through both (five SDs apart at this cost) is what the data leave open."""
+SPLIT_STARTS = (0.1, 0.3, 0.5, 0.7, 0.9)
+"""Link shares I / (I + J) the searches over the inertia split start from."""
 LINK_BAND_FRACTION = 0.6
 """The comparison band's upper limit as a fraction of the link's resonance sqrt(k / I) / 2 pi."""
 
-import os
 _DEBUG = bool(os.environ.get("MOCAPFJ_OE_DEBUG"))
 FRICTION_SCALES = (0.003, 0.01, 0.03, 0.1)
 """Starting points of the tanh law's eps, as fractions of the motor velocity's RMS (each fitted
@@ -183,15 +187,49 @@ def burg_ar(x: np.ndarray, max_order: int) -> tuple[np.ndarray, float]:
     return best[1], best[2]
 
 
+def wiener_drive(q_m: np.ndarray, fs_hz: float) -> np.ndarray:
+    """The motor angle with its white noise filtered out where the noise dominates, for driving
+    the simulated link: the zero-phase Wiener gain max(0, 1 - N / P(f)), P the angle's Welch
+    spectrum (4 s Hann windows) and N the white floor (:func:`.conditioning.noise_floor_sd`),
+    applied by FFT after removing the straight line through the ends and mirroring (no edge step).
+    The link's resonance amplifies what drives it by its quality factor (k / (v omega), 10-100):
+    an encoder's noise of a few 1e-5 rad, raw, rings the simulated link where the real one, driven
+    by the true motion, does not, and the fit moves the inertia split to damp that ringing (about
+    -50 % on I in grid cases). The unchanged angle when it shows no noise above its quantisation."""
+    from scipy.signal import welch
+
+    from .conditioning import noise_floor_sd
+
+    q_m = np.asarray(q_m, dtype=np.float64)
+    sm = noise_floor_sd(q_m, fs_hz)
+    n = q_m.size
+    if not sm > 0 or n < 64:
+        return q_m
+    nper = int(min(n, max(64, 4 * fs_hz)))
+    f, P = welch(q_m, fs=fs_hz, nperseg=nper)
+    N = sm ** 2 / (fs_hz / 2)
+    gain = np.clip(1.0 - N / np.maximum(P, 1e-300), 0.0, 1.0)
+    line = q_m[0] + (q_m[-1] - q_m[0]) * np.arange(n) / max(n - 1, 1)
+    r = q_m - line
+    ext = np.concatenate([r, -r[::-1]])             # odd mirror: continuous at the joins (both ends 0)
+    F = np.fft.rfft(ext)
+    fe = np.fft.rfftfreq(ext.size, 1.0 / fs_hz)
+    F *= np.interp(fe, f, gain)
+    return np.fft.irfft(F, ext.size)[:n] + line
+
+
 class _Data:
     """The measurements on their own instants: the controller's (t_c uniform at fs_c: q_m, its
     derivatives, u) and the mocap's (q at t_q, measured mask), and the Hermite weights that take
     a controller-rate simulation to the mocap instants."""
 
-    def __init__(self, t_c, q_m, u, fs_c, t_q, q, measured, trim_s, band_hz):
+    def __init__(self, t_c, q_m, u, fs_c, t_q, q, measured, trim_s, band_hz, drive=None):
         self.fs = fs_c
         self.q_m, self.u = q_m, u
         self.qd_m, self.qdd_m = derivatives(q_m, fs_c)
+        # the simulated link's drive: the motor angle without the noise that would ring it
+        self.q_drive = q_m if drive is None else drive
+        self.qd_drive = np.gradient(self.q_drive) * fs_c
         trim = int(round(trim_s * fs_c))
         self.trim = trim
         # the torque channel: band-limited and decimated (none when the band is the whole rate)
@@ -222,9 +260,14 @@ class _Data:
         self.iq = np.arange(edge_q, i.size - edge_q, self.stride_q)
         self.q = self.q_band(q[inside])
         filled = ~measured[inside]
-        if self.stride_q > 1:       # a decimated sample is measured unless a gap fills much of its span
+        if self.stride_q > 1:
+            # a decimated sample is measured unless a gap fills much of its span; the low-pass
+            # spreads a long gap's straight line over a period of the band on either side
             frac = np.convolve(filled.astype(float), np.ones(self.stride_q) / self.stride_q, mode="same")
-            filled = frac > 0.5
+            reach = int(np.ceil(self.fs_q / self.band))
+            run = np.convolve(filled.astype(float), np.ones(reach), mode="same") >= reach   # inside a long gap
+            near = np.convolve(run.astype(float), np.ones(4 * reach + 1), mode="same") > 0
+            filled = (frac > 0.5) | near
         self.filled = filled[self.iq]
         self.t_c = t_c
 
@@ -284,7 +327,7 @@ class _Problem:
 
     def _link(self, x, sens=False):
         p = dict(zip(OE_NAMES, x))
-        return link_response(self.d.q_m, self.d.fs, eps=p["eps"], k3=p["k3"], qd_m=self.d.qd_m, sensitivities=sens,
+        return link_response(self.d.q_drive, self.d.fs, eps=p["eps"], k3=p["k3"], qd_m=self.d.qd_drive, sensitivities=sens,
                              max_phase=self.max_phase, **{n: p[n] for n in _LINK})
 
     def simulate(self, x):
@@ -299,6 +342,10 @@ class _Problem:
         (N m), each in the band at its kept rows."""
         x = np.asarray(x, dtype=np.float64)
         q_s, w_s = self.simulate(x)
+        if not (np.isfinite(q_s).all() and np.isfinite(w_s).all()):
+            # the simulation diverged at a trial step (a stiff, light link at the edge of the
+            # kernel's stability): a residual the optimiser rejects, not a crash
+            return np.full(self.d.q.shape, 1.0), np.full(self.d.u_b.shape, 1e3 * (np.abs(self.d.u_b).max() + 1.0))
         r_q = self.d.q - self.d.q_band(self.d.at_mocap(q_s, w_s)) - x[_IDX["z"]]
         r_u = self.d.u_b - (x[_IDX["J"]] * self.d.qdd_b + x[_IDX["b"]] * self.d.qd_b + self._spring_b(x, q_s))
         return r_q, r_u
@@ -322,6 +369,8 @@ class _Problem:
         """The whitened Jacobian with respect to every parameter (rows as fun's)."""
         x = np.asarray(x, dtype=np.float64)
         q_s, w_s, Sq, Sw = self._link(x, sens=True)           # d q_sim / d (link parameters, eps, k3)
+        if not (np.isfinite(Sq).all() and np.isfinite(Sw).all() and np.isfinite(q_s).all()):
+            raise FloatingPointError("the link's simulation diverged")
         Sm = self.d.q_band(self.d.at_mocap(Sq, Sw))
         delta = self.d.q_m - q_s
         k, k3 = x[_IDX["k"]], x[_IDX["k3"]]
@@ -343,7 +392,10 @@ class _Problem:
         return np.vstack(self._white(Jq, Ju))
 
     def jac(self, xf):
-        return self.jac_full(self.full(xf))[:, self.free]
+        try:
+            return self.jac_full(self.full(xf))[:, self.free]
+        except FloatingPointError:      # only at a step the optimiser will reject (raw's residual)
+            return np.zeros((self.fun(xf).size, int(self.free.sum())))
 
     def time_index(self) -> np.ndarray:
         """Each whitened row's controller sample (for the sandwich's autocovariances)."""
@@ -460,8 +512,8 @@ def _encoder_noise_shift(q_m_c, fs_c, u_c, t_c, t, q, measured, trim_s, band, la
                          replicates: int = 2):
     """The Gauss-Newton step from x that a second dose of the motor angle's white noise (its SD
     from the spectrum's floor, :func:`.conditioning.noise_floor_sd`) causes, averaged over
-    `replicates` fixed-seed draws: (10,) with zeros for fixed parameters, or None when the angle
-    shows no noise above its quantisation."""
+    `replicates` fixed-seed draws: (n,) with zeros for parameters not in `free`, or None when the
+    angle shows no noise above its quantisation."""
     from .conditioning import noise_floor_sd
 
     sm = noise_floor_sd(q_m_c, fs_c)
@@ -477,14 +529,24 @@ def _encoder_noise_shift(q_m_c, fs_c, u_c, t_c, t, q, measured, trim_s, band, la
         r = p2.fun(x[p2.free])
         sc = np.linalg.norm(J, axis=0)
         sc[sc == 0] = 1.0
-        step = -np.linalg.lstsq(J / sc, r, rcond=None)[0] / sc
-        steps.append(step)
+        steps.append(-np.linalg.lstsq(J / sc, r, rcond=None)[0] / sc)
     out = np.zeros(x.size)
     out[free] = np.mean(steps, axis=0)
     return out
 
 
-def _hysteresis_test(prob: _Problem, x) -> dict | None:
+def _wiener_drive_shift(q_m_c, fs_c, u_c, t_c, t, q, measured, trim_s, band, law, scale, prob, x, free):
+    """How far the fit moves (a refit from x, up to 15 evaluations) when the simulated link is
+    driven by the Wiener-filtered motor angle (:func:`wiener_drive`) instead of the raw one:
+    (n,), zeros for parameters not in `free`."""
+    d2 = _Data(t_c, q_m_c, u_c, fs_c, t, q, measured, trim_s, band, drive=wiener_drive(q_m_c, fs_c))
+    p2 = _Problem(d2, law, scale, ((prob.a_q, prob.s_q), (prob.a_u, prob.s_u)), cubic=prob.cubic)
+    p2.free = prob.free & free
+    x2, _, _ = _solve(p2, x, 15, 1e-8)
+    return np.where(free, x2 - x, 0.0)
+
+
+def _hysteresis_test(prob: _Problem, x, threshold: float = HYSTERESIS_CHI2) -> dict | None:
     """A score test for a hysteretic spring at the fitted linear one: the Bouc-Wen spring
     alpha k delta + (1 - alpha) k z(delta; beta = gamma) adds k_h (z - delta) (k_h = (1 - alpha) k)
     to the motor torque; its whitened column along the simulated (noise-free) deflection, made
@@ -526,7 +588,7 @@ def _hysteresis_test(prob: _Problem, x) -> dict | None:
     k = x[_IDX["k"]]
     if _DEBUG:
         print("hysteresis test", best, "k", k)
-    if best is None or not (best["chi2"] > HYSTERESIS_CHI2 and best["k_h"] > HYSTERESIS_MIN_SHARE * k):
+    if best is None or not (best["chi2"] > threshold and best["k_h"] > HYSTERESIS_MIN_SHARE * k):
         return None
     best["alpha"] = float(max(0.0, 1.0 - best["k_h"] / k))
     return best
@@ -654,7 +716,7 @@ def identify_output_error(t, q, q_m, u, *, fs_hz: float, measured=None, controll
     prob0, _, _ = fit(b0, "sign", x, None, 1, search=True)
     noise0 = ((prob0.a_q, prob0.s_q), (prob0.a_u, prob0.s_u))
     best = None
-    for frac in (None, 0.1, 0.3, 0.5, 0.7, 0.9):
+    for frac in (None,) + SPLIT_STARTS:
         xs = x.copy()
         if frac is not None:
             xs[_IDX["I"]], xs[_IDX["J"]] = frac * A, (1 - frac) * A
@@ -685,7 +747,21 @@ def identify_output_error(t, q, q_m, u, *, fs_hz: float, measured=None, controll
             if target <= band * 1.05:
                 break
             band = min(target, 3.0 * band)
-            _, x, _ = fit(band, law, x, None, 25, search=True)
+            prob_b, x, cost_b = fit(band, law, x, None, 25, search=True)
+        # the split again in the final band: in the excitation's band the cost is nearly flat along
+        # I + J = const, and in the wider one it is rugged (each stick and slip of the friction), so
+        # a local fit from the first band's split can stop far from the best
+        if band > 1.05 * b0:
+            noise_b = ((prob_b.a_q, prob_b.s_q), (prob_b.a_u, prob_b.s_u))
+            A = x[_IDX["I"]] + x[_IDX["J"]]
+            best = (cost_b, x)
+            for frac in SPLIT_STARTS:
+                xs = x.copy()
+                xs[_IDX["I"]], xs[_IDX["J"]] = frac * A, (1 - frac) * A
+                _, xs, c = fit(band, law, xs, noise_b, 8, search=True)
+                if c < best[0]:
+                    best = (c, xs)
+            x = best[1]
     # 4. the final fit, whitened by the noise models of the last residuals; then a look at the
     #    inertia split from either side (the cost can have a second minimum there)
     prob, x, cost = fit(band, law, x, "white")
@@ -696,17 +772,22 @@ def identify_output_error(t, q, q_m, u, *, fs_hz: float, measured=None, controll
         xs = x.copy()
         xs[_IDX["I"]] = min(frac * x[_IDX["I"]], 0.97 * A)
         xs[_IDX["J"]] = A - xs[_IDX["I"]]
-        _, xs, c = fit(band, law, xs, noise, 10, coarse=True)
+        _, xs, c = fit(band, law, xs, noise, 10)
         if c < cost + AMBIGUITY_CHI2:
             p2, xs, c = fit(band, law, xs, noise, 25)
             found.append((c, xs, p2))
     cost, x, prob = min(found, key=lambda f: f[0])
     others = [(c - cost, xs) for c, xs, _ in found
               if c - cost < AMBIGUITY_CHI2 and np.abs(xs[_IDX["I"]] - x[_IDX["I"]]) > 1e-6 * A]
-    # 5. a stiffening (or softening) spring: k delta + k3 delta^3, kept when the data want it by far
+    # 5b. a stiffening (or softening) spring: k delta + k3 delta^3, kept when the data want it by far
     #    (a likelihood ratio of CUBIC_CHI2) and it changes the stiffness by CUBIC_MIN_PCT over the
     #    deflections the recording reaches
-    if test_cubic:
+    # 5a. a hysteretic spring first (a loop is otherwise read as a stiffening curve): the score
+    #     test at the linear spring; when it finds one, no cubic term
+    hysteresis = _hysteresis_test(prob, x) if test_hysteresis else None
+    # a weaker loop (down to the cubic's threshold) wins over a cubic term that gains less
+    weak = _hysteresis_test(prob, x, CUBIC_CHI2) if test_hysteresis and hysteresis is None else None
+    if test_cubic and hysteresis is None:
         x3 = x.copy()
         x3[_IDX["k3"]] = 0.3 * x[_IDX["k"]] / (3.0 * float(np.percentile(np.abs(q_m_c - prob.simulate(x)[0]), 95)) ** 2)
         pc, xc, cc = fit(band, law, x3, noise, 25, cubic=True)       # from 30 % stiffening: the
@@ -715,10 +796,12 @@ def identify_output_error(t, q, q_m, u, *, fs_hz: float, measured=None, controll
         change = 300.0 * xc[_IDX["k3"]] * d95 ** 2 / xc[_IDX["k"]]
         if _DEBUG:
             print(f"cubic test: chi2 {cost - cc:.1f} change {change:.1f} % k3 {xc[_IDX['k3']]:.4g} d95 {d95:.3g}")
-        if cost - cc > CUBIC_CHI2 and abs(change) > CUBIC_MIN_PCT:
+        nonlinear = cost - cc > CUBIC_CHI2 and abs(change) > CUBIC_MIN_PCT
+        if nonlinear and weak is not None and weak["chi2"] > cost - cc:
+            hysteresis = weak                  # the spring is nonlinear, and a loop explains it better
+        elif nonlinear:
             prob, x, cost = pc, xc, cc
             others = []
-    hysteresis = _hysteresis_test(prob, x) if test_hysteresis else None
     data = datas[band]
     eps = float(x[_IDX["eps"]])
     r = prob.fun(x[prob.free])
@@ -749,9 +832,29 @@ def identify_output_error(t, q, q_m, u, *, fs_hz: float, measured=None, controll
     # the motor angle's own noise drives the simulated link (its resonance, through the friction):
     # the shift that twice that noise would cause is measured, removed once (a first-order
     # simulation-extrapolation, Cook and Stefanski 1994) and counted in the SD
-    encoder_shift = _encoder_noise_shift(q_m_c, fs_c, u_c, t_c, t, q, measured, trim_s, band, law, scale, prob, x, free)
+    args = (q_m_c, fs_c, u_c, t_c, t, q, measured, trim_s, band, law, scale, prob, x, free)
+    try:
+        encoder_shift = _encoder_noise_shift(*args)
+    except FloatingPointError:
+        # the re-noised drive rings the simulated link past the kernel's stability: the fit rests
+        # on a knife's edge of the motor angle's noise, and the splits it sets are not measured
+        encoder_shift = None
+        split = np.isin(np.array(OE_NAMES), ("I", "J", "v", "b")) & free
+        var = np.where(split, np.fmax(var, x ** 2), var)
+    drive_spread = None
     if encoder_shift is not None:
         sig = np.abs(encoder_shift) > ENCODER_SHIFT_SDS * np.sqrt(var)
+        # the shift can be far from linear (the cost is rugged along the inertia split): the fit
+        # driven by the Wiener-filtered motor angle, which treats the noise the other way, shows
+        # how far; the difference is counted in the SD (not corrected: neither drive is the truth)
+        if (np.abs(encoder_shift) > ENCODER_REFIT_SDS * np.sqrt(var))[free].any():
+            try:
+                drive_spread = _wiener_drive_shift(*args)
+                var = np.where(free, np.fmax(var, drive_spread ** 2), var)
+            except FloatingPointError:
+                drive_spread = None
+            if _DEBUG:
+                print("drive spread", dict(zip(OE_NAMES, np.round(drive_spread, 5))))
         if sig[free].any():
             x = np.where(free, x - encoder_shift, x)
             var = np.where(free, var + encoder_shift ** 2, var)

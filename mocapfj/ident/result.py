@@ -60,9 +60,10 @@ class Parameter:
         return _rel_pct(self.value, self.std)
 
     def to_dict(self) -> dict:
-        out = {"value": float(self.value), "std": float(self.std), "rel_std_pct": self.rel_std_pct}
+        out = {"value": float(self.value), "std": float(self.std), "rel_std_pct": self.rel_std_pct,
+               "determined": bool(self.determined)}
         if not self.determined:
-            out.update(determined=False, reason=self.reason)
+            out["reason"] = self.reason
         return out
 
 

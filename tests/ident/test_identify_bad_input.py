@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from mocapfj import InputError, identify_joint
-from mocapfj.ident import joint_signals
+from mocapfj.ident import identify_signals, joint_signals
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -48,11 +48,19 @@ def test_a_short_gap_is_filled_and_counted(short):
 
 
 def test_a_long_gap_is_refused_with_where_it_is(short):
+    """A 0.2 s gap: output error takes it (the link is simulated through it, its samples left
+    out); motor-first, which differentiates the filled angle, refuses it with where it is; a gap
+    over 2 s is refused by all."""
     rec, d = short
-    bad = _with_gap(d, 500, 50)       # 50 frames at 250 Hz: 0.204 s between the angles around it
+    s = joint_signals(_with_gap(d, 500, 50), rec.controller, "j2", source="bundle")   # 50 frames at 250 Hz: 0.204 s
+    assert (~s.measured).sum() >= 50
     with pytest.raises(InputError, match=r"^bundle: joints\[j2\] link angle: expected gaps in the link angle of at "
-                                         r"most 0\.1 s, got 0\.204 s without an angle from t = 2\.000 s"):
-        joint_signals(bad, rec.controller, "j2", source="bundle")
+                                         r"most 0\.1 s for motor_first, .*got 0\.204 s without an angle from "
+                                         r"t = 2\.000 s"):
+        identify_signals(s, method="motor_first", recording="bundle")
+    with pytest.raises(InputError, match=r"^bundle: joints\[j2\] link angle: expected gaps in the link angle of at "
+                                         r"most 2 s, got 2\.404 s without an angle from t = 2\.000 s"):
+        joint_signals(_with_gap(d, 500, 600), rec.controller, "j2", source="bundle", min_valid=0.5)
 
 
 def test_nan_in_the_controller_log_is_refused_with_its_time(short):
