@@ -8,8 +8,9 @@ Goals (issue 5: identification):
 Each trial is pa10_joint2 with its own seed (marker layout, camera and torque noise) run through
 `mocapfj joints` (markers -> angles -> deflection); the joint signals are cached in --cache
 (default benchmarks/.cache/identify), so a second run only times identification. What is timed
-is `mocapfj.identify_joint` (motor-first, the Lightcap and Banks (2007) two-step and one-step
-formulations for the condition numbers, spring selection among all models) per trial, serially
+is `mocapfj.identify_joint` (`--method`, default output error, with the controller's own samples;
+the Lightcap and Banks (2007) two-step and one-step formulations for the condition numbers; the
+spring tests) per trial, serially
 and on 2 worker processes. Peer in the same run: Lightcap and Banks' own two-step (step 1 of eq. 6, the
 linear spring of eq. 7), whose accuracy on the same trials is printed beside.
 """
@@ -42,7 +43,7 @@ SEEDS = tuple(range(101, 111))
 
 def _trial(seed: int, cache: Path) -> Path:
     """Signals (t, q, q_m, u) of one trial on the mocap clock, generated once and cached."""
-    path = cache / f"pa10_joint2_seed{seed}.npz"
+    path = cache / f"pa10_joint2_seed{seed}_v2.npz"
     if path.exists():
         return path
     import tempfile
@@ -56,17 +57,21 @@ def _trial(seed: int, cache: Path) -> Path:
     with tempfile.TemporaryDirectory() as d:
         write_scenario_bundle(sr, Path(d) / "bundle")
         s = mocapfj.signals(Path(d) / "bundle")["j2"]
-        t, q, q_m, u = s.t, s.q, s.q_m, s.u
     cache.mkdir(parents=True, exist_ok=True)
     tmp = path.with_suffix(".tmp.npz")
-    np.savez(tmp, t=t, q=q, q_m=q_m, u=u)
+    np.savez(tmp, t=s.t, q=s.q, q_m=s.q_m, u=s.u, fs=s.fs_hz, measured=s.measured, t_c=s.t_c, q_m_c=s.q_m_c,
+             u_c=s.u_c, fs_c=s.fs_c_hz)
     tmp.replace(path)
     return path
 
 
-def _identify(path: Path, method: str = "motor_first") -> dict:
+METHOD = os.environ.get("BENCH_IDENTIFY_METHOD", "output_error")
+
+
+def _identify(path: Path, method: str | None = None) -> dict:
     d = np.load(path)
-    r = identify_joint(d["t"], d["q"], d["q_m"], d["u"], fs_hz=250.0, method=method)
+    r = identify_joint(d["t"], d["q"], d["q_m"], d["u"], fs_hz=float(d["fs"]), method=method or METHOD,
+                       measured=d["measured"], controller=(d["t_c"], d["q_m_c"], d["u_c"], float(d["fs_c"])))
     return {"values": {n: r[n] for n in NAMES}, "spring": r.spring.model,
             "cond_two_step": r.cond["cond_two_step"], "cond_one_step": r.cond["cond_one_step"]}
 
@@ -74,7 +79,10 @@ def _identify(path: Path, method: str = "motor_first") -> dict:
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--cache", type=Path, default=ROOT / "benchmarks" / ".cache" / "identify")
+    ap.add_argument("--method", default="output_error", help="identification method (default output_error)")
     args = ap.parse_args()
+    global METHOD
+    METHOD = os.environ["BENCH_IDENTIFY_METHOD"] = args.method          # the workers inherit it
     t0 = time.perf_counter()
     paths = [_trial(s, args.cache) for s in SEEDS]
     print(f"trials ready in {time.perf_counter() - t0:.1f} s ({len(paths)} x 60 s, cache {args.cache})")
@@ -115,8 +123,8 @@ def main() -> int:
           f"condition number two-step {c2:.0f} < one-step {c1:.0f}: {c2 < c1}")
     print("\n| identification of 10 x 60 s trials | time (s) | goal |")
     print("|---|---|---|")
-    print(f"| mocapfj motor-first + springs, 1 process | {t_serial:.2f} | |")
-    print(f"| mocapfj motor-first + springs, 2 processes | {t_par:.2f} | < 10 s |")
+    print(f"| mocapfj {METHOD} + springs, 1 process | {t_serial:.2f} | |")
+    print(f"| mocapfj {METHOD} + springs, 2 processes | {t_par:.2f} | < 10 s |")
     print(f"| Lightcap and Banks (2007) two-step + springs, 2 processes | {t_seed:.2f} | (peer: {t_par / t_seed:.2f}x its time) |")
     ok &= t_par < 10.0
     print(f"\n{'all goals met' if ok else 'GOAL MISSED'}")
