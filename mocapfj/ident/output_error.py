@@ -229,7 +229,7 @@ class _Data:
         self.qd_m, self.qdd_m = derivatives(q_m, fs_c)
         # the simulated link's drive: the motor angle without the noise that would ring it
         self.q_drive = q_m if drive is None else drive
-        self.qd_drive = np.gradient(self.q_drive) * fs_c
+        self.qd_drive = self.qd_m if drive is None else derivatives(drive, fs_c)[0]
         trim = int(round(trim_s * fs_c))
         self.trim = trim
         # the torque channel: band-limited and decimated (none when the band is the whole rate)
