@@ -6,6 +6,8 @@ A parameter is reported *not determined* (``determined: false`` with a reason) w
   gravity moments: of the gravity magnitude sqrt(mglx^2 + mgly^2));
 - the joint shows no gravity torque at all: the magnitude is within three SDs of zero (a vertical
   axis or a balanced link; mglx and mgly are then 0 within their SDs, not measured);
+- (the inertia split) the motor angle's noise, not the motion, can set it (output error:
+  :func:`.output_error.split_noise_chi2` above 25);
 - the data push it against a physical bound (a friction, damping, inertia or stiffness of zero):
   a non-physical value is a finding, and its likely causes (an undeclared clock offset between
   mocap and controller, a sign or scale error) are named.
@@ -23,6 +25,10 @@ import math
 import numpy as np
 
 from .result import PARAMETER_NAMES, UNDETERMINED_REL_STD_PCT, Parameter
+
+SPLIT_NOISE_CHI2 = 25.0
+"""Output error: when the motor angle's noise changes its expected share of the cost by more than
+this over the inertia splits (:func:`.output_error.split_noise_chi2`), the split is not determined."""
 
 __all__ = ["judge_parameters", "combinations"]
 
@@ -56,7 +62,8 @@ def judge_parameters(names, values, std, cov, *, duration_s: float, context: dic
     duration_s : the recording's length (for what a longer one would give).
     context : facts for the reasons: ``sigma_q_rad`` (mocap angle noise per sample), ``band_hz``
         (comparison band), ``deflection_viscous_rad`` and ``deflection_inertial_rad`` (RMS of
-        v q' / k and I q'' / k along the motion).
+        v q' / k and I q'' / k along the motion), ``motor_noise_rad`` and ``split_noise_chi2``
+        (output error: the motor angle's noise and how strongly it pulls on the inertia split).
     at_bound : names held at a bound of zero by the estimator.
     """
     ctx = context or {}
@@ -112,6 +119,14 @@ def judge_parameters(names, values, std, cov, *, duration_s: float, context: dic
                     reason = (f"relative SD {rel:.3g} %: only {a} + {b} = {tot:.4g} +- {tot_sd:.2g} is determined; "
                               f"the split rests on the link's {what}{facts}; {how}, a larger marker cluster or "
                               f"{_longer(rel, duration_s)} would determine it")
+                    chi2 = ctx.get("split_noise_chi2", 0.0)
+                    if a == "I" and chi2 > SPLIT_NOISE_CHI2:
+                        reason = (f"relative SD {rel:.3g} %: only I + J = {tot:.4g} +- {tot_sd:.2g} is determined; the "
+                                  f"motor angle's noise ({ctx['motor_noise_rad']:.2g} rad per sample) drives the "
+                                  f"simulated link, and how the inertia splits changes that noise's share of the "
+                                  f"torque residual by {chi2:.0f} (chi-square), so the noise, not the "
+                                  f"motion, can set the split; a quieter motor angle (a finer encoder, or "
+                                  "its noise filtered before logging) or a faster motion would determine it")
                 else:
                     reason = (f"relative SD {rel:.3g} % above {UNDETERMINED_REL_STD_PCT:g} %: its torque is near the "
                               f"noise along this motion; {_longer(rel, duration_s)}")

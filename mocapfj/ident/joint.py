@@ -132,7 +132,8 @@ def _output_error_joint(t, q, q_m, u, fs_hz, decimate, models, measured, control
     qd, qdd = derivatives(lowpass(np.asarray(q_m, float), fs_hz, min(oe.band_hz, 0.4 * fs_hz)), fs_hz)
     context = {"sigma_q_rad": white_noise_sd(np.asarray(q, float), fs_hz), "band_hz": oe.band_hz,
                "deflection_viscous_rad": float(np.std(f["v"] * qd) / f["k"]),
-               "deflection_inertial_rad": float(np.std(f["I"] * qdd) / f["k"])}
+               "deflection_inertial_rad": float(np.std(f["I"] * qdd) / f["k"]),
+               "motor_noise_rad": oe.motor_noise_rad, "split_noise_chi2": oe.split_noise_chi2}
     values = judge_parameters(f.names, f.values, f.std, f.cov, duration_s=float(t[-1] - t[0]), context=context,
                               at_bound=oe.at_bound)
     extra = {"combinations": {k: {"value": v, "std": sd} for k, (v, sd) in
