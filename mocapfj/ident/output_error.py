@@ -59,7 +59,7 @@ from scipy.signal import lfilter, resample_poly
 from ..dynamics.link_response import link_response
 from ..errors import InputError
 from ..types import LSResult
-from .conditioning import check_signals, derivatives, lowpass
+from .conditioning import check_signals, derivatives, lowpass, noise_floor_sd
 from .determinacy import SPLIT_NOISE_CHI2
 from .ls import sandwich_cov
 
@@ -205,8 +205,6 @@ def wiener_drive(q_m: np.ndarray, fs_hz: float) -> np.ndarray:
     by the true motion, does not, and the fit moves the inertia split to damp that ringing (about
     -50 % on I in grid cases). The unchanged angle when it shows no noise above its quantisation."""
     from scipy.signal import welch
-
-    from .conditioning import noise_floor_sd
 
     q_m = np.asarray(q_m, dtype=np.float64)
     sm = noise_floor_sd(q_m, fs_hz)
@@ -488,8 +486,6 @@ def eiv_band_hz(q_m: np.ndarray, fs_hz: float, max_share: float = 1e-3) -> float
     errors-in-variables regressor biases its parameter by about that share. Hz."""
     from scipy.signal import welch
 
-    from .conditioning import noise_floor_sd
-
     sm = noise_floor_sd(q_m, fs_hz)
     _, qdd = derivatives(q_m, fs_hz)
     nper = int(min(q_m.size, max(64, 2 * fs_hz)))
@@ -507,8 +503,6 @@ def encoder_band_hz(q_m: np.ndarray, fs_hz: float, ratio: float = 10.0) -> float
     noise. Welch spectrum with 4 s windows, Hz (fs / 2 when it never sinks that low)."""
     from scipy.signal import welch
 
-    from .conditioning import noise_floor_sd
-
     sm = noise_floor_sd(q_m, fs_hz)
     nper = int(min(q_m.size, max(64, 4 * fs_hz)))
     f, P = welch(q_m, fs=fs_hz, nperseg=nper)
@@ -522,7 +516,6 @@ def _encoder_noise_shift(q_m_c, fs_c, u_c, t_c, t, q, measured, trim_s, band, la
     from the spectrum's floor, :func:`.conditioning.noise_floor_sd`) causes, averaged over
     `replicates` fixed-seed draws: (n,) with zeros for parameters not in `free`, or None when the
     angle shows no noise above its quantisation."""
-    from .conditioning import noise_floor_sd
 
     sm = noise_floor_sd(q_m_c, fs_c)
     if not sm > 0:
@@ -543,6 +536,24 @@ def _encoder_noise_shift(q_m_c, fs_c, u_c, t_c, t, q, measured, trim_s, band, la
     return out
 
 
+def _split_at(x, share: float) -> np.ndarray:
+    """x with the inertia I + J split as I = share (I + J), J the rest (a copy)."""
+    xs = np.array(x, dtype=np.float64)
+    A = xs[_IDX["I"]] + xs[_IDX["J"]]
+    xs[_IDX["I"]], xs[_IDX["J"]] = share * A, (1 - share) * A
+    return xs
+
+
+def _search_split(x, run, best=None) -> tuple:
+    """The best (cost, x) of run(start) -> (x, cost) from each share of SPLIT_STARTS, and from x
+    itself unless `best` = (cost, x) is already known for it."""
+    for share in (SPLIT_STARTS if best is not None else (None,) + SPLIT_STARTS):
+        xs, c = run(np.array(x, dtype=np.float64) if share is None else _split_at(x, share))
+        if best is None or c < best[0]:
+            best = (c, xs)
+    return best
+
+
 def _wiener_drive_shift(q_m_c, fs_c, u_c, t_c, t, q, measured, trim_s, band, law, scale, prob, x, free):
     """How far the fit moves when the simulated link is driven by the Wiener-filtered motor angle
     (:func:`wiener_drive`) instead of the raw one: the inertia split searched again from x and from
@@ -553,15 +564,7 @@ def _wiener_drive_shift(q_m_c, fs_c, u_c, t_c, t, q, measured, trim_s, band, law
     noise = ((prob.a_q, prob.s_q), (prob.a_u, prob.s_u))
     search = _Problem(d2, law, scale, noise, max_phase=0.15, cubic=prob.cubic)
     search.free = prob.free & free
-    A = x[_IDX["I"]] + x[_IDX["J"]]
-    best = None
-    for frac in (None,) + SPLIT_STARTS:
-        xs = x.copy()
-        if frac is not None:
-            xs[_IDX["I"]], xs[_IDX["J"]] = frac * A, (1 - frac) * A
-        xs, c, _ = _solve(search, xs, 8, 1e-6)
-        if best is None or c < best[0]:
-            best = (c, xs)
+    best = _search_split(x, lambda xs: _solve(search, xs, 8, 1e-6)[:2])
     p2 = _Problem(d2, law, scale, noise, cubic=prob.cubic)
     p2.free = search.free
     x2, _, _ = _solve(p2, best[1], 20, 1e-8)
@@ -609,12 +612,7 @@ def split_noise_chi2(prob: _Problem, x, sigma_m: float) -> float:
     with the noise, within 0.5 % without it); the pull's size depends on how flat the cost is
     along the split, which a quadratic model at the fit does not capture, so the split is then
     reported as not determined."""
-    A = x[_IDX["I"]] + x[_IDX["J"]]
-    costs = []
-    for frac in np.linspace(0.02, 0.98, 25):
-        xs = np.array(x, dtype=np.float64)
-        xs[_IDX["I"]], xs[_IDX["J"]] = frac * A, (1 - frac) * A
-        costs.append(drive_noise_cost(prob, xs, sigma_m))
+    costs = [drive_noise_cost(prob, _split_at(x, share), sigma_m) for share in np.linspace(0.02, 0.98, 25)]
     return float(max(costs) - min(costs))
 
 
@@ -750,8 +748,7 @@ def identify_output_error(t, q, q_m, u, *, fs_hz: float, measured=None, controll
 
     def data_at(b_hz):
         if b_hz not in datas:
-            datas[b_hz] = _Data(t_c, q_m_c, u_c, fs_c, t, q, measured, trim_s, b_hz,
-                                drive=wiener_drive(q_m_c, fs_c) if os.environ.get("OE_WIENER") else None)
+            datas[b_hz] = _Data(t_c, q_m_c, u_c, fs_c, t, q, measured, trim_s, b_hz)
         return datas[b_hz]
 
     def fit(b_hz, law, x_start, noise=None, budget=max_nfev, coarse=False, cubic=False, search=False):
@@ -785,18 +782,9 @@ def identify_output_error(t, q, q_m, u, *, fs_hz: float, measured=None, controll
     # 1. the split of the total inertia I + J: the cost in the excitation's band can have a second
     #    minimum at a light, stiff link; short fits from several splits, the best kept
     b0 = min(band0, f_max) if band_hz is None else float(band_hz)
-    A = x[_IDX["I"]] + x[_IDX["J"]]
     prob0, _, _ = fit(b0, "sign", x, None, 1, search=True)
     noise0 = ((prob0.a_q, prob0.s_q), (prob0.a_u, prob0.s_u))
-    best = None
-    for frac in (None,) + SPLIT_STARTS:
-        xs = x.copy()
-        if frac is not None:
-            xs[_IDX["I"]], xs[_IDX["J"]] = frac * A, (1 - frac) * A
-        _, xs, c = fit(b0, "sign", xs, noise0, 8, search=True)
-        if best is None or c < best[0]:
-            best = (c, xs)
-    x = best[1]
+    x = _search_split(x, lambda xs: fit(b0, "sign", xs, noise0, 8, search=True)[1:])[1]
     # 2. the Coulomb law in that band: sign with sticking, or tanh with eps fitted from the best
     #    of a few starting values
     prob_s, x_s, cost_s = fit(b0, "sign", x, None, 25, search=True)
@@ -826,15 +814,7 @@ def identify_output_error(t, q, q_m, u, *, fs_hz: float, measured=None, controll
         # a local fit from the first band's split can stop far from the best
         if band > 1.05 * b0:
             noise_b = ((prob_b.a_q, prob_b.s_q), (prob_b.a_u, prob_b.s_u))
-            A = x[_IDX["I"]] + x[_IDX["J"]]
-            best = (cost_b, x)
-            for frac in SPLIT_STARTS:
-                xs = x.copy()
-                xs[_IDX["I"]], xs[_IDX["J"]] = frac * A, (1 - frac) * A
-                _, xs, c = fit(band, law, xs, noise_b, 8, search=True)
-                if c < best[0]:
-                    best = (c, xs)
-            x = best[1]
+            x = _search_split(x, lambda xs: fit(band, law, xs, noise_b, 8, search=True)[1:], (cost_b, x))[1]
     # 4. the final fit, whitened by the noise models of the last residuals; then a look at the
     #    inertia split from either side (the cost can have a second minimum there)
     prob, x, cost = fit(band, law, x, "white")
@@ -935,7 +915,6 @@ def identify_output_error(t, q, q_m, u, *, fs_hz: float, measured=None, controll
             encoder_shift = None
     # the motor angle's noise can set the inertia split by itself (drive_noise_cost): then the
     # split is not measured, and I and J get an SD spanning the splits (uniform over I + J)
-    from .conditioning import noise_floor_sd
 
     sigma_m = noise_floor_sd(q_m_c, fs_c)
     split_chi2 = split_noise_chi2(prob, x, sigma_m) if sigma_m > 0 else 0.0
