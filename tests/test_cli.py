@@ -75,6 +75,23 @@ def test_bad_input_is_one_line_and_exit_2(tmp_path, capsys):
     assert err.startswith("mocapfj: error: ") and "format: expected version 1 or older, got version 9" in err
 
 
+def test_inspect_of_a_cut_c3d_is_one_line_and_exit_2(tmp_path):
+    """A half-cut C3D once read as half its frames with exit 0; cut inside its parameter section it
+    segfaulted ezc3d. Both are one line naming the file and the field, exit 2, as a user runs it."""
+    from mocapfj.io import write_recording
+    from mocapfj.synth import toy_recording
+
+    write_recording(toy_recording(duration_s=2.0), tmp_path / "d")
+    c3d = next((tmp_path / "d").glob("*.c3d"))
+    raw = c3d.read_bytes()
+    for keep, says in ((len(raw) // 2, "POINT:FRAMES: expected"), (700, "parameter section: expected")):
+        c3d.write_bytes(raw[:keep])
+        r = subprocess.run([sys.executable, "-m", "mocapfj.cli", "inspect", str(tmp_path / "d")],
+                           capture_output=True, text=True, timeout=60)
+        assert r.returncode == 2 and r.stdout == "" and r.stderr.count("\n") == 1, r.stderr
+        assert f"{c3d.name}: {says}" in r.stderr and "cut" in r.stderr
+
+
 @pytest.mark.parametrize("name", [n for n, _ in PLANNED])
 def test_planned_commands_say_so_and_exit_2(name, capsys):
     assert main([name, "x"]) == 2

@@ -1,14 +1,20 @@
-"""C3D marker files through ezc3d, converted to SI at the boundary.
+"""C3D marker files, converted to SI at the boundary.
 
-Reading: positions come from ezc3d and are converted to metres from POINT:UNITS; occluded
-samples are NaN. The fourth word of each point sample (residual in the low byte, camera mask in
-the high byte, C3D user guide "3D point data") is decoded here from the data block, because
-ezc3d 1.7 swaps those two bytes (pyomeca/ezc3d#386): its "residuals" are the camera byte.
+Reading is done here, not by ezc3d: the header and the parameter section are parsed and every
+offset, count and dimension is checked against the file's size before anything is allocated, so
+a cut or corrupt file is one InputError in time and memory bounded by the file (ezc3d 1.7
+segfaulted, hung or took 12 GB on a file cut inside its parameter section, and stops at 65535
+frames). Positions are converted to metres from POINT:UNITS; occluded samples (a negative fourth
+word, or NaN coordinates) are NaN. The fourth word of each point sample holds the residual in the
+low byte and the camera mask in the high byte (C3D user guide, "3D point data"); ezc3d 1.7 swaps
+the two bytes (pyomeca/ezc3d#386). Frame counts above 65535 follow the C3D convention: POINT:FRAMES
+as a floating-point number, POINT:LONG_FRAMES, or TRIAL:ACTUAL_START_FIELD / ACTUAL_END_FIELD.
 
-Writing: floating-point storage in millimetres with POINT:SCALE = -0.01, so residuals keep
-0.01 mm resolution up to 2.55 mm. ezc3d lays out the parameters and data; this module then
-writes the header scale word (ezc3d leaves it at -1, which the `c3d` package rejects) and the
-fourth words in the layout of the standard, and renames the file into place.
+Writing: ezc3d lays out the parameters and data, in floating-point storage in millimetres with
+POINT:SCALE = -0.01, so residuals keep 0.01 mm resolution up to 2.55 mm; this module then writes
+the header scale word (ezc3d leaves it at -1, which the `c3d` package rejects), the fourth words
+in the layout of the standard and, above 65535 frames, POINT:LONG_FRAMES; the file is renamed
+into place when complete.
 
 Times: sample i of a file whose first frame is f (1-based, header word 4) is at
 t = (f - 1 + i) / POINT:RATE seconds on the mocap clock.
@@ -16,6 +22,7 @@ t = (f - 1 + i) / POINT:RATE seconds on the mocap clock.
 
 from __future__ import annotations
 
+import math
 import os
 import struct
 from pathlib import Path
@@ -53,21 +60,171 @@ def unit_factor(path, field: str, units) -> float:
     return UNIT_TO_M[u]
 
 
-def _param(c, group: str, name: str):
-    try:
-        return c["parameters"][group][name]["value"]
-    except KeyError:
+_TYPES = {-1: 1, 1: 1, 2: 2, 4: 4}        # parameter element type -> bytes per element
+MAX_COORD_M = 1.0e3
+"""Largest coordinate accepted (m): a capture volume is metres across; beyond a kilometre the data
+block is garbage or the units are wrong."""
+
+
+class _Header:
+    """The C3D header and parameter section, validated against the file's size (no field read
+    outside the file, every count bounded by it)."""
+
+    def __init__(self, raw: bytes, path: Path):
+        def bad(field, expected, got, hint=None):
+            return InputError(path, field, expected, got, hint=hint)
+
+        size = len(raw)
+        if size < 512:
+            raise bad("file", "a C3D file (a 512-byte header at least)", f"{size} bytes")
+        if raw[1] != 0x50:
+            raise bad("file", "a C3D file (header byte 2 = 0x50)", f"0x{raw[1]:02x}", hint="not a C3D file")
+        self.param_start = (raw[0] - 1) * 512
+        if raw[0] < 2 or self.param_start + 4 > size:
+            raise bad("header word 1", "the parameter section's block inside the file",
+                      f"block {raw[0]} of a {size}-byte file", hint="the file is cut or not a C3D file")
+        self.processor = raw[self.param_start + 3]
+        if self.processor not in (_INTEL, _DEC, _MIPS):
+            raise bad("parameter section", "a processor type 84 (Intel), 85 (DEC) or 86 (MIPS)", self.processor,
+                      hint="not a C3D file, or a corrupt one")
+        self.end = ">" if self.processor == _MIPS else "<"
+        n_blocks = raw[self.param_start + 2]
+        self.param_end = self.param_start + 512 * n_blocks
+        if n_blocks < 1 or self.param_end > size:
+            raise bad("parameter section", f"{n_blocks} blocks of 512 bytes inside the file",
+                      f"a file of {size} bytes (the section would end at byte {self.param_end})",
+                      hint="the file is cut inside its parameter section")
+        words = struct.unpack(self.end + "HHHHH", raw[2:12])
+        self.n_points, self.n_analog, self.first, self.last, _ = words
+        self.scale = self._float(raw[12:16])
+        self.data_block = struct.unpack(self.end + "H", raw[16:18])[0]
+        self.rate = self._float(raw[20:24])
+        self.params = self._parameters(raw, bad)
+
+    def _float(self, b: bytes) -> float:
+        if self.processor == _DEC:          # DEC F-float: swap the 16-bit halves, then / 4
+            return struct.unpack("<f", b[2:4] + b[0:2])[0] / 4.0
+        return struct.unpack(self.end + "f", b)[0]
+
+    def _parameters(self, raw: bytes, bad) -> dict:
+        """{GROUP: {NAME: value}}: strings for character data (a tuple for an array of them),
+        numpy arrays (Fortran order flattened) for numbers."""
+        groups: dict[int, str] = {}
+        pending: list[tuple[int, str, object]] = []
+        pos, stop = self.param_start + 4, self.param_end
+        for _ in range((stop - pos) // 5 + 1):                    # every record is 5 bytes at least
+            if pos + 2 > stop:
+                break
+            nchar = abs(struct.unpack("b", raw[pos:pos + 1])[0])
+            gid = struct.unpack("b", raw[pos + 1:pos + 2])[0]
+            if nchar == 0:
+                break
+            name_end = pos + 2 + nchar
+            if name_end + 2 > stop:
+                raise bad("parameter section", f"a parameter record inside the section (bytes {self.param_start}"
+                          f"-{stop})", f"a record running to byte {name_end + 2}", hint="corrupt parameter section")
+            name = raw[pos + 2:name_end].decode("latin-1").strip().upper()
+            offset = struct.unpack(self.end + "h", raw[name_end:name_end + 2])[0]
+            body = name_end + 2
+            nxt = name_end + offset if offset > 0 else stop
+            if nxt > stop or (offset > 0 and offset < 2):
+                raise bad(f"parameter {name}", f"a record inside the parameter section (bytes {self.param_start}"
+                          f"-{stop})", f"a next-record offset to byte {nxt}", hint="corrupt parameter section")
+            if gid < 0:
+                groups[-gid] = name
+            elif gid > 0:
+                pending.append((gid, name, self._value(raw, body, nxt, name, bad)))
+            if offset == 0:
+                break
+            pos = nxt
+        out: dict[str, dict] = {g: {} for g in groups.values()}
+        for gid, name, value in pending:
+            if gid in groups:
+                out[groups[gid]].setdefault(name, value)       # the first of a repeated name
+        return out
+
+    def _value(self, raw: bytes, pos: int, stop: int, name: str, bad):
+        if pos + 2 > stop:
+            raise bad(f"parameter {name}", "a type and dimensions inside the record", "a record cut short")
+        typ = struct.unpack("b", raw[pos:pos + 1])[0]
+        ndim = raw[pos + 1]
+        if typ not in _TYPES or ndim > 7 or pos + 2 + ndim > stop:
+            raise bad(f"parameter {name}", "type -1, 1, 2 or 4 and at most 7 dimensions", f"type {typ}, {ndim} dimensions",
+                      hint="corrupt parameter section")
+        dims = tuple(raw[pos + 2:pos + 2 + ndim])
+        count = int(np.prod(dims)) if ndim else 1
+        start = pos + 2 + ndim
+        if start + count * _TYPES[typ] > stop:
+            raise bad(f"parameter {name}", f"{count} elements of {_TYPES[typ]} bytes inside its record",
+                      f"a record of {stop - start} bytes", hint="corrupt parameter section")
+        data = raw[start:start + count * _TYPES[typ]]
+        if typ == -1:
+            if ndim <= 1:
+                return data.decode("latin-1").rstrip("\x00 ")
+            width = dims[0]
+            if width == 0:
+                return ("",) * int(np.prod(dims[1:]))
+            return tuple(data[i:i + width].decode("latin-1").rstrip("\x00 ") for i in range(0, len(data), width))
+        if typ == 1:
+            return np.frombuffer(data, np.uint8).astype(np.int64)
+        if typ == 2:
+            return np.frombuffer(data, self.end + "i2").astype(np.int64)
+        with np.errstate(invalid="ignore", over="ignore"):     # signalling NaNs of a corrupt record
+            if self.processor == _DEC:
+                u = np.frombuffer(data, "<u2").reshape(-1, 2)
+                return u[:, ::-1].copy().view("<u4").view("<f4").ravel().astype(np.float64) / 4.0
+            return np.frombuffer(data, self.end + "f4").astype(np.float64)
+
+    def get(self, group: str, name: str):
+        return self.params.get(group, {}).get(name)
+
+    def number(self, group: str, name: str):
+        """The first element of a numeric parameter, or None."""
+        v = self.get(group, name)
+        if isinstance(v, np.ndarray) and v.size:
+            return float(v[0])
         return None
 
 
-def _labels(c, used: int) -> tuple[str, ...]:
+def _unsigned(v: float) -> int:
+    """An int16 word read as the unsigned count the C3D convention means (POINT:FRAMES, USED)."""
+    v = int(v)
+    return v + 65536 if v < 0 else v
+
+
+def _frames(h: _Header) -> int:
+    """The number of frames: POINT:FRAMES (floating point above 65535, the C3D convention),
+    POINT:LONG_FRAMES or TRIAL:ACTUAL_START_FIELD / ACTUAL_END_FIELD when it says 65535, the
+    header's range when the parameter is missing."""
+    v = h.get("POINT", "FRAMES")
+    if isinstance(v, np.ndarray) and v.size:
+        if v.dtype.kind == "f":
+            return int(round(float(v[0])))
+        n = _unsigned(v[0])
+        if n < 65535:
+            return n
+    long_frames = h.number("POINT", "LONG_FRAMES")
+    if long_frames is not None and long_frames >= 65535:
+        return int(round(long_frames))
+    s, e = h.get("TRIAL", "ACTUAL_START_FIELD"), h.get("TRIAL", "ACTUAL_END_FIELD")
+    if isinstance(s, np.ndarray) and isinstance(e, np.ndarray) and s.size >= 2 and e.size >= 2:
+        start = (int(s[0]) & 0xFFFF) + 65536 * (int(s[1]) & 0xFFFF)
+        end = (int(e[0]) & 0xFFFF) + 65536 * (int(e[1]) & 0xFFFF)
+        if end >= start:
+            return end - start + 1
+    if isinstance(v, np.ndarray) and v.size:
+        return _unsigned(v[0])
+    return max(0, h.last - h.first + 1)
+
+
+def _labels(h: _Header, used: int) -> tuple[str, ...]:
     """POINT:LABELS, LABELS2, ... concatenated, cut to POINT:USED, made unique."""
     names: list[str] = []
-    point = c["parameters"]["POINT"]
     for key in ["LABELS"] + [f"LABELS{i}" for i in range(2, 100)]:
-        if key not in point:
+        v = h.get("POINT", key)
+        if v is None:
             break
-        names.extend(str(s).strip() for s in point[key]["value"])
+        names.extend(s.strip() for s in ((v,) if isinstance(v, str) else v) if isinstance(s, str))
     names = names[:used] + [f"M{i + 1:03d}" for i in range(len(names), used)]
     seen: dict[str, int] = {}
     out = []
@@ -91,26 +248,14 @@ def _layout(raw: bytes) -> tuple[int, int, int, int, int]:
     return processor, n_points, n_analog, (data_block - 1) * 512, first
 
 
-def _fourth_words(raw: bytes, n_frames: int, is_float: bool) -> np.ndarray:
-    """The 4th word of every point sample as int32 (negative = invalid), shape (F, P)."""
-    processor, n_points, n_analog, start, _ = _layout(raw)
-    words_per_frame = 4 * n_points + n_analog
-    count = n_frames * words_per_frame
-    if is_float:
-        if processor == _DEC:
-            # DEC F-float: swap the two 16-bit halves to get IEEE bits, then divide by 4.
-            u = np.frombuffer(raw, "<u2", count=2 * count, offset=start).reshape(-1, 2)
-            vals = u[:, ::-1].copy().view("<u4").view("<f4").ravel() / 4.0
-        else:
-            vals = np.frombuffer(raw, ">f4" if processor == _MIPS else "<f4", count=count, offset=start)
-        vals = vals.reshape(n_frames, words_per_frame)[:, 3 : 4 * n_points : 4]
-        return np.where(np.isfinite(vals), vals, -1).astype(np.int32)
-    vals = np.frombuffer(raw, ">i2" if processor == _MIPS else "<i2", count=count, offset=start)
-    return vals.reshape(n_frames, words_per_frame)[:, 3 : 4 * n_points : 4].astype(np.int32)
-
-
 def read_c3d(path: str | os.PathLike[str]) -> MarkerTrajectories:
     """Read marker trajectories from a C3D file.
+
+    The header and the parameter section are parsed and checked against the file's size here
+    (every offset, count and dimension inside the file), and the point data are read with numpy:
+    a cut or corrupt file is one InputError in time and memory bounded by its size. Files of more
+    than 65535 frames follow the C3D convention (POINT:FRAMES as a floating-point number, or
+    POINT:LONG_FRAMES, or TRIAL:ACTUAL_START_FIELD and ACTUAL_END_FIELD).
 
     Returns
     -------
@@ -122,43 +267,91 @@ def read_c3d(path: str | os.PathLike[str]) -> MarkerTrajectories:
     Raises
     ------
     InputError
-        Missing or unreadable file, missing or unknown POINT:UNITS, non-positive POINT:RATE.
+        Missing, cut or corrupt file; missing or unknown POINT:UNITS; non-positive POINT:RATE;
+        non-finite coordinates or coordinates beyond MAX_COORD_M.
     """
-    import ezc3d
-
     path = Path(path)
     if not path.is_file():
         raise InputError(path, "file", "an existing C3D file", "no such file")
     try:
-        c = ezc3d.c3d(str(path))
-    except (RuntimeError, ValueError, IndexError, OSError) as e:
-        raise InputError(path, "file", "a readable C3D file", str(e).splitlines()[0] if str(e) else type(e).__name__) from None
-    units = _param(c, "POINT", "UNITS")
-    factor = unit_factor(path, "POINT:UNITS", units[0] if units else "")
-    rate = _param(c, "POINT", "RATE")
-    rate = float(rate[0]) if rate is not None and len(rate) else float(c["header"]["points"]["frame_rate"])
-    if not rate > 0:
+        raw = path.read_bytes()
+    except OSError as e:
+        raise InputError(path, "file", "a readable C3D file", e.strerror or type(e).__name__) from None
+    if len(raw) < 512:
+        raise InputError(path, "file", "a readable C3D file", f"{len(raw)} bytes (a C3D header is 512)")
+    h = _Header(raw, path)
+    units = h.get("POINT", "UNITS")
+    factor = unit_factor(path, "POINT:UNITS", units if isinstance(units, str) else (units[0] if units else ""))
+    rate = h.number("POINT", "RATE")
+    rate = h.rate if rate is None else rate
+    if not (math.isfinite(rate) and rate > 0):
         raise InputError(path, "POINT:RATE", "a positive point rate in Hz", rate)
-    pts = np.asarray(c["data"]["points"], dtype=np.float64)  # (4, M, F)
-    n_markers, n_frames = pts.shape[1], pts.shape[2]
-    used = _param(c, "POINT", "USED")
-    labels = _labels(c, int(used[0]) if used is not None and len(used) else n_markers)[:n_markers]
-    xyz = pts[:3].transpose(2, 1, 0) * factor  # (F, M, 3)
-
-    scale = _param(c, "POINT", "SCALE")
-    scale = float(scale[0]) if scale is not None and len(scale) else -1.0
-    raw = path.read_bytes()
-    if n_markers and n_frames:
-        words = _fourth_words(raw, n_frames, is_float=scale < 0)[:, :n_markers]
-        residual = (words & 0xFF).astype(np.float64) * abs(scale) * factor
-        invalid = (words < 0) | np.isnan(xyz).any(axis=2)
-        residual[invalid] = np.nan
-        xyz[invalid] = np.nan
-    else:
-        residual = np.full((n_frames, n_markers), np.nan)
-    first0 = int(c["header"]["points"]["first_frame"])  # ezc3d: 0-based
+    scale = h.number("POINT", "SCALE")
+    scale = h.scale if scale is None else scale
+    if not (math.isfinite(scale) and scale != 0):
+        raise InputError(path, "POINT:SCALE", "a non-zero finite scale", scale)
+    n_points = h.n_points
+    used = h.number("POINT", "USED")
+    if used is not None and _unsigned(used) != n_points:
+        raise InputError(path, "POINT:USED", f"the header's number of points ({n_points})", _unsigned(used),
+                         hint="corrupt header or parameter section")
+    n_frames = _frames(h)
+    is_float = scale < 0
+    words = 4 * n_points + h.n_analog
+    item = 4 if is_float else 2
+    start = (h.data_block - 1) * 512
+    if h.data_block < 1 or start < h.param_end:
+        raise InputError(path, "header word 9", f"a data block after the parameter section (block >= "
+                         f"{h.param_end // 512 + 1})", h.data_block, hint="corrupt header")
+    need = start + n_frames * words * item
+    if need > len(raw):
+        whole = max(0, (len(raw) - start) // max(words * item, 1))
+        raise InputError(path, "POINT:FRAMES", f"{n_frames} frames of data ({need} bytes)",
+                         f"a file of {len(raw)} bytes, which holds {whole} whole frames",
+                         hint="the file is cut; export it again")
+    labels = _labels(h, n_points)
+    first0 = h.first - 1 if h.first > 0 else 0
+    st = h.get("TRIAL", "ACTUAL_START_FIELD")
+    if h.first == 65535 and isinstance(st, np.ndarray) and st.size >= 2:
+        first0 = (int(st[0]) & 0xFFFF) + 65536 * (int(st[1]) & 0xFFFF) - 1
     t = (first0 + np.arange(n_frames)) / rate
+    if not (n_points and n_frames):
+        return MarkerTrajectories(t=t, xyz=np.zeros((n_frames, n_points, 3)), labels=labels, rate_hz=rate,
+                                  residual=np.full((n_frames, n_points), np.nan))
+    block = _point_block(raw, h, start, n_frames, words, is_float)        # (F, P, 4) in file units
+    fourth = block[:, :, 3]
+    xyz = block[:, :, :3] * (1.0 if is_float else abs(scale))
+    invalid = ~np.isfinite(fourth) | (fourth < 0) | np.isnan(block[:, :, :3]).any(axis=2)   # NaN: some writers' "lost"
+    fourth_int = np.clip(np.where(invalid, 0, fourth), 0, 2 ** 31 - 1).astype(np.int64)
+    residual = (fourth_int & 0xFF).astype(np.float64) * abs(scale) * factor
+    xyz = xyz * factor
+    residual[invalid] = np.nan
+    xyz[invalid] = np.nan
+    valid = ~np.isnan(xyz)
+    with np.errstate(invalid="ignore", over="ignore"):
+        wild = valid & ~(np.abs(xyz) <= MAX_COORD_M)
+    if wild.any():
+        f, m, _ = np.argwhere(wild)[0]
+        raise InputError(path, f"POINT data, marker {labels[m]}, frame {int(f) + 1}",
+                         f"finite coordinates within {MAX_COORD_M:g} m of the origin",
+                         f"{xyz[f, m].tolist()} m ({int(wild.any(axis=2).sum())} samples like it)",
+                         hint="the data block is corrupt or POINT:UNITS is wrong")
     return MarkerTrajectories(t=t, xyz=xyz, labels=labels, rate_hz=rate, residual=residual)
+
+
+def _point_block(raw: bytes, h: _Header, start: int, n_frames: int, words: int, is_float: bool) -> np.ndarray:
+    """The point words (F, P, 4) as float64 in file units (integers unscaled)."""
+    count = n_frames * words
+    if is_float:
+        with np.errstate(invalid="ignore", over="ignore"):     # signalling NaNs of a corrupt block
+            if h.processor == _DEC:
+                u = np.frombuffer(raw, "<u2", count=2 * count, offset=start).reshape(-1, 2)
+                vals = u[:, ::-1].copy().view("<u4").view("<f4").ravel().astype(np.float64) / 4.0
+            else:
+                vals = np.frombuffer(raw, h.end + "f4", count=count, offset=start).astype(np.float64)
+    else:
+        vals = np.frombuffer(raw, h.end + "i2", count=count, offset=start).astype(np.float64)
+    return vals.reshape(n_frames, words)[:, :4 * h.n_points].reshape(n_frames, h.n_points, 4)
 
 
 def write_c3d(path: str | os.PathLike[str], markers: MarkerTrajectories) -> None:
@@ -182,6 +375,9 @@ def write_c3d(path: str | os.PathLike[str], markers: MarkerTrajectories) -> None
     if n_frames and (first0 < 0 or np.max(np.abs(frame_index - (first0 + np.arange(n_frames)))) > 1e-6):
         raise InputError(path, "t", f"uniform samples at {rate} Hz starting at a frame index >= 0",
                          "non-uniform or negative times", hint="resample before writing a C3D")
+    if first0 + 1 > 65535:
+        raise InputError(path, "t", "a first frame index below 65535 (the C3D header's word)", first0,
+                         hint="shift the times to start nearer 0")
     if n_markers > 255:
         raise InputError(path, "labels", "at most 255 markers in one C3D file", n_markers)
 
@@ -202,6 +398,11 @@ def write_c3d(path: str | os.PathLike[str], markers: MarkerTrajectories) -> None
     c["data"]["meta_points"]["residuals"] = np.where(invalid.T, -1.0, 0.0)[None]
     c["data"]["meta_points"]["camera_masks"] = np.zeros((7, n_markers, n_frames), bool)
     c["header"]["points"]["first_frame"] = first0
+    if n_frames > 65535 or first0 + n_frames > 65535:
+        # the C3D convention for long trials (ezc3d stops POINT:FRAMES and the header's range at
+        # 65535): POINT:LONG_FRAMES, a floating-point count (ezc3d would store TRIAL:ACTUAL_*_FIELD
+        # word pairs as floats, which other readers reject, so they are left out)
+        c.add_parameter("POINT", "LONG_FRAMES", float(n_frames))
 
     res_byte = np.clip(np.round(res_mm / abs(np.float32(scale))), 0, 255)
     fourth = np.where(invalid, -1.0, res_byte).astype("<f4")

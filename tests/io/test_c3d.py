@@ -176,3 +176,122 @@ def test_missing_units(tmp_path):
     c.write(str(tmp_path / "nounits.c3d"))
     with pytest.raises(InputError, match=r"nounits\.c3d: POINT:UNITS: expected a length unit.*got nothing"):
         read_c3d(tmp_path / "nounits.c3d")
+
+
+# -- cut, corrupt and long files (issue: bad input) ----------------------------------------------
+
+def _valid_file(tmp_path, n_frames=200, n_markers=4):
+    m = _markers(np.random.default_rng(5), n_frames, n_markers, drop=0.05)
+    p = tmp_path / "v.c3d"
+    write_c3d(p, m)
+    return p, m
+
+
+def test_a_file_cut_anywhere_is_one_error_naming_the_cut(tmp_path):
+    """Every cut through the header, the parameter section and the data block: an InputError (a
+    cut inside the parameter section once segfaulted, hung or took 12 GB in ezc3d)."""
+    p, m = _valid_file(tmp_path)
+    raw = p.read_bytes()
+    cut = tmp_path / "cut.c3d"
+    data_start = (struct.unpack("<H", raw[16:18])[0] - 1) * 512
+    data_end = data_start + 200 * 4 * 16                  # 200 frames of 4 markers x 4 floats
+    for n in list(range(0, data_start + 64, 7)) + [len(raw) // 2, data_end - 1]:
+        cut.write_bytes(raw[:n])
+        with pytest.raises(InputError, match=r"cut\.c3d: ") as e:
+            read_c3d(cut)
+        assert "\n" not in str(e.value)
+    cut.write_bytes(raw[:len(raw) // 2])
+    with pytest.raises(InputError, match=r"POINT:FRAMES: expected 200 frames .* holds \d+ whole frames .*the file is cut"):
+        read_c3d(cut)
+
+
+def test_corrupt_parameter_records_are_refused(tmp_path):
+    p, _ = _valid_file(tmp_path)
+    raw = bytearray(p.read_bytes())
+    start = (raw[0] - 1) * 512
+    bad = tmp_path / "bad.c3d"
+    # the parameter section claims more blocks than the file has
+    b = raw.copy()
+    b[start + 2] = 250
+    bad.write_bytes(bytes(b))
+    with pytest.raises(InputError, match=r"parameter section: expected 250 blocks .*cut inside its parameter section"):
+        read_c3d(bad)
+    # the first record's next-record offset points past the section
+    b = raw.copy()
+    nchar = abs(struct.unpack("b", bytes(b[start + 4:start + 5]))[0])
+    off = start + 4 + 2 + nchar
+    b[off:off + 2] = struct.pack("<h", 32000)
+    bad.write_bytes(bytes(b))
+    with pytest.raises(InputError, match=r"expected a record inside the parameter section"):
+        read_c3d(bad)
+    # an unknown processor type
+    b = raw.copy()
+    b[start + 3] = 99
+    bad.write_bytes(bytes(b))
+    with pytest.raises(InputError, match=r"processor type 84"):
+        read_c3d(bad)
+
+
+def test_garbage_or_infinite_coordinates_are_refused_with_the_marker_and_frame(tmp_path):
+    p, m = _valid_file(tmp_path, n_frames=50, n_markers=3)
+    raw = bytearray(p.read_bytes())
+    start = (struct.unpack("<H", raw[16:18])[0] - 1) * 512
+    bad = tmp_path / "g.c3d"
+    b = raw.copy()                                   # frame 11, marker 2, x: 3e35 mm
+    i = start + (10 * 12 + 4) * 4
+    b[i:i + 4] = struct.pack("<f", 3e35)
+    b[i + 12:i + 16] = struct.pack("<f", 0.0)        # a valid sample
+    bad.write_bytes(bytes(b))
+    with pytest.raises(InputError, match=rf"POINT data, marker {m.labels[1]}, frame 11: expected finite coordinates within 1000 m"):
+        read_c3d(bad)
+    b = raw.copy()
+    b[i:i + 4] = struct.pack("<f", np.inf)
+    bad.write_bytes(bytes(b))
+    with pytest.raises(InputError, match=r"frame 11: expected finite coordinates"):
+        read_c3d(bad)
+
+
+@settings(max_examples=150, deadline=None)
+@given(data=st.data())
+def test_mutated_bytes_give_markers_or_one_error(tmp_path_factory, data):
+    """Random bytes overwritten anywhere in a valid file: a MarkerTrajectories or an InputError,
+    never another exception (bounded: the reader allocates no more than the file's size)."""
+    d = tmp_path_factory.mktemp("fuzz")
+    p, _ = _valid_file(d, n_frames=30, n_markers=3)
+    raw = bytearray(p.read_bytes())
+    for _ in range(data.draw(st.integers(1, 8))):
+        i = data.draw(st.integers(0, len(raw) - 1))
+        raw[i] = data.draw(st.integers(0, 255))
+    if data.draw(st.booleans()):
+        raw = raw[:data.draw(st.integers(0, len(raw)))]
+    q = d / "m.c3d"
+    q.write_bytes(bytes(raw))
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")              # numpy's warnings handled where they arise
+            got = read_c3d(q)
+    except InputError as e:
+        assert "\n" not in str(e) and str(e).startswith(str(q))
+    else:
+        assert isinstance(got, MarkerTrajectories)
+
+
+def test_ten_minutes_at_250_hz_round_trip(tmp_path):
+    """150001 frames: more than the 65535 that the header's words and an int16 POINT:FRAMES can
+    say; written with POINT:LONG_FRAMES (C3D convention), read back whole, also by the c3d package."""
+    n = 150001
+    rng = np.random.default_rng(6)
+    xyz = np.cumsum(rng.normal(0, 1e-4, (n, 3, 3)), axis=0) + 1.0
+    xyz[rng.random((n, 3)) < 0.01] = np.nan
+    m = MarkerTrajectories(t=np.arange(n) / 250.0, xyz=xyz, labels=("A", "B", "C"), rate_hz=250.0)
+    p = tmp_path / "long.c3d"
+    write_c3d(p, m)
+    back = read_c3d(p)
+    assert back.n_frames == n and back.t[-1] == pytest.approx(600.0)
+    np.testing.assert_allclose(back.xyz, m.xyz, rtol=1.2e-7, equal_nan=True)
+    import c3d
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        with open(p, "rb") as h:
+            assert c3d.Reader(h).frame_count == n
