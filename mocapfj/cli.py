@@ -299,7 +299,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         return int(args.func(args))
     except InputError as e:
-        print(f"mocapfj: error: {e}", file=sys.stderr)
+        msg = str(e)
+        if e.file == "<argument>" and e.field in vars(args):
+            # a Python argument that came from a command-line option: name the option
+            msg = msg.replace(f"<argument>: {e.field}:", "--" + e.field.replace("_", "-") + ":", 1)
+        print(f"mocapfj: error: {msg}", file=sys.stderr)
         return 2
     except OSError as e:
         where = f"{e.filename}: " if getattr(e, "filename", None) else ""

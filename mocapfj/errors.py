@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from os import PathLike
 
-__all__ = ["InputError"]
+__all__ = ["InputError", "not_utf8"]
 
 
 class InputError(ValueError):
@@ -48,3 +48,9 @@ class InputError(ValueError):
         if hint:
             msg += f" ({hint})"
         super().__init__(" ".join(msg.split()))  # always one line
+
+
+def not_utf8(path, e: UnicodeDecodeError) -> InputError:
+    """The InputError for a file that is not UTF-8 text: where, and which byte (never the text)."""
+    return InputError(path, f"byte {e.start}", "UTF-8 text", f"byte 0x{e.object[e.start]:02x}",
+                      hint="save the file as UTF-8")

@@ -212,6 +212,11 @@ def joint_signals(d: Deflection, controller: ControllerLog, joint: str, *, min_v
             raise InputError(source, f"controller log {name} (joint {joint})", "finite samples",
                              f"{int(bad.sum())} NaN, the first at t = {controller.t[np.argmax(bad)]:.4f} s",
                              hint="cut the trial where the log is complete")
+        if x.size and np.ptp(x) == 0:
+            what = "a motor torque that varies while the joint moves" if name == "tau" else "a motor angle that moves"
+            raise InputError(source, f"controller log {name} (joint {joint})", what,
+                             f"the constant {float(x[0]):g} in all {x.size} samples",
+                             hint="check the column recording.toml names for this joint")
     cutoff = min(100.0, 0.45 * controller.rate_hz)
     q_m = controller_on(t, controller.t, controller.q_m[:, j], controller.rate_hz, cutoff)
     u = controller_on(t, controller.t, controller.tau[:, j], controller.rate_hz, cutoff)

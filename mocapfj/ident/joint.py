@@ -158,6 +158,10 @@ def _output_error_joint(t, q, q_m, u, fs_hz, decimate, models, measured, control
     return values, spring, {"output_error": f}, f.residual_rms, f["z"], extra, oe.friction_scale
 
 
+MIN_DECIMATED = 200
+"""Samples a decimation must leave for the two-step and motor-first regressions."""
+
+
 def identify_joint(t, q, q_m, u, *, fs_hz: float, method: str = "output_error", cutoff_hz: float | None = None,
                    decimate: int = 2, spring_models=None, name: str = "", gear_ratio: float = 1.0,
                    frames_filled: int = 0, recording: str = "", measured=None, controller=None) -> IdentifiedJoint:
@@ -187,6 +191,12 @@ def identify_joint(t, q, q_m, u, *, fs_hz: float, method: str = "output_error", 
 
     if method not in IDENTIFY_METHODS:
         raise InputError(None, "method", f"one of {list(IDENTIFY_METHODS)}", repr(method))
+    n_t = int(np.size(t))
+    if isinstance(decimate, bool) or not isinstance(decimate, (int, np.integer)) or decimate < 1:
+        raise InputError(None, "decimate", "an integer decimation factor >= 1", repr(decimate))
+    if n_t // decimate < MIN_DECIMATED:
+        raise InputError(None, "decimate", f"a factor that leaves at least {MIN_DECIMATED} of the recording's {n_t} samples "
+                         f"(at most {max(1, n_t // MIN_DECIMATED)})", decimate)
     extra, smoothing = {}, 0.0
     try:
         two = identify_two_step(t, q, q_m, u, fs_hz=fs_hz, cutoff_hz=10.0 if cutoff_hz is None else cutoff_hz,

@@ -12,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import InputError
+from ..errors import InputError, not_utf8
 from .atomic import write_text_atomic
 
 __all__ = ["read_csv_columns", "write_csv_columns", "check_increasing", "format_floats"]
@@ -31,7 +31,10 @@ def read_csv_columns(path: str | os.PathLike[str]) -> dict[str, np.ndarray]:
     path = Path(path)
     if not path.is_file():
         raise InputError(path, "file", "an existing CSV file", "no such file")
-    text = path.read_text(encoding="utf-8-sig")
+    try:
+        text = path.read_text(encoding="utf-8-sig")
+    except UnicodeDecodeError as e:
+        raise not_utf8(path, e) from None
     lines = text.splitlines()
     if not lines or not lines[0].strip():
         raise InputError(path, "header", "a first row of column names", "an empty file")

@@ -10,7 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import InputError
+from ..errors import InputError, not_utf8
 from ..types import Detections
 from .atomic import write_text_atomic
 from .csvio import read_csv_columns, write_csv_columns
@@ -53,6 +53,8 @@ def read_json(path: str | os.PathLike[str]):
         return json.loads(path.read_text(encoding="utf-8"))
     except json.JSONDecodeError as e:
         raise InputError(path, f"line {e.lineno}", "valid JSON", e.msg) from None
+    except UnicodeDecodeError as e:
+        raise not_utf8(path, e) from None
 
 
 _DET_COLUMNS = ("frame", "camera", "x_px", "y_px")

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import tomli_w
 
-from ..errors import InputError
+from ..errors import InputError, not_utf8
 from .atomic import write_text_atomic
 
 __all__ = ["read_toml", "write_toml", "check_format", "require"]
@@ -25,6 +25,8 @@ def read_toml(path: str | os.PathLike[str]) -> dict:
             return tomllib.load(f)
     except tomllib.TOMLDecodeError as e:
         raise InputError(path, "syntax", "valid TOML", str(e)) from None
+    except UnicodeDecodeError as e:
+        raise not_utf8(path, e) from None
 
 
 def write_toml(path: str | os.PathLike[str], doc: dict) -> None:
