@@ -358,9 +358,20 @@ SPRING_FITTERS = {"linear": fit_linear, "cubic": fit_cubic, "piecewise": fit_pie
 HYSTERETIC = ("bouc_wen", "dahl", "maxwell_slip")
 
 
+def _loss_differential_z(dl: np.ndarray) -> float:
+    """Mean of a loss differential over its Newey-West standard error (4 N^(1/3) lags, Bartlett)."""
+    n = dl.size
+    lags = min(n - 1, int(np.ceil(4 * n ** (1 / 3))))
+    dc = dl - dl.mean()
+    gamma = np.array([dc[k:] @ dc[:n - k] / n for k in range(lags + 1)])
+    var = gamma[0] + 2 * np.sum((1 - np.arange(1, lags + 1) / (lags + 1)) * gamma[1:])
+    return float(dl.mean() / np.sqrt(var / n)) if var > 0 else (np.inf if dl.mean() > 0 else 0.0)
+
+
 def select_spring_model(delta, tau_s, t, *, models=("linear", "cubic", "piecewise", "backlash", "bouc_wen", "dahl",
                                                     "maxwell_slip"),
-                        holdout: float = 0.3, criterion: str = "bic", min_gain_pct: float = 2.0) -> SpringSelection:
+                        holdout: float = 0.3, criterion: str = "bic", min_gain_pct: float = 2.0,
+                        min_z: float = 2.0) -> SpringSelection:
     """Fit each model on the first 1 - `holdout` of the series and score it on the rest.
 
     The score is an information criterion on the held-out samples, N ln(RSS/N) + p ln N (BIC) or
@@ -373,7 +384,12 @@ def select_spring_model(delta, tau_s, t, *, models=("linear", "cubic", "piecewis
     correlated, so the criterion alone would take a 1 % gain for real; through the mocap chain a
     linear spring shows such an apparent softening (the link angle's calibration error grows
     with the angle), while the springs this is for (cubic, piecewise, backlash, hysteresis)
-    change the torque by far more.
+    change the torque by far more. And the gain must be significant: the held-out loss
+    differential (squared linear residual minus the model's) has a mean of at least `min_z`
+    standard errors, its standard error from a Newey-West estimate over 4 N^(1/3) lags (the
+    Diebold and Mariano (1995) test, robust to the residuals' autocorrelation). Through the mocap
+    chain of a linear joint a piecewise spring gained 3.0 % at z = 1.7; the nonlinear springs
+    of the tests gain 7-100 % at z = 2.4-14.
     """
     d, y, tt = _check(delta, tau_s, t)
     if not 0 < holdout < 1:
@@ -400,8 +416,14 @@ def select_spring_model(delta, tau_s, t, *, models=("linear", "cubic", "piecewis
         rss = float(r @ r)
         fits[m], rms[m] = f, float(np.sqrt(rss / n))
         crit[m] = n * np.log(rss / n) + (f.n_params * np.log(n) if criterion == "bic" else 2 * f.n_params)
+    def significant(m):
+        r_lin = (fits["linear"].predict(d, tt) - y)[test]
+        r_m = (fits[m].predict(d, tt) - y)[test]
+        return _loss_differential_z(r_lin ** 2 - r_m ** 2) >= min_z
+
     allowed = {m: c for m, c in crit.items()
-               if "linear" not in rms or m == "linear" or rms[m] <= (1 - min_gain_pct / 100) * rms["linear"]}
+               if "linear" not in rms or m == "linear"
+               or (rms[m] <= (1 - min_gain_pct / 100) * rms["linear"] and significant(m))}
     best = min(allowed, key=allowed.get)
     dev = y[test] - y[test].mean()
     return SpringSelection(chosen=fits[best], fits=fits, holdout_rms=rms, criterion=crit,
