@@ -31,6 +31,20 @@ PLANNED = [
 ]
 
 
+def _work(args):
+    """Where a command writes: the staging directory main() made beside --out."""
+    return getattr(args, "stage", None) or args.out
+
+
+def _inputs(args) -> list:
+    """The paths a command reads (that --out must keep clear of)."""
+    out = []
+    for name in ("scenario", "recording", "model", "validation"):
+        if getattr(args, name, None):
+            out.append(getattr(args, name))
+    return out + list(getattr(args, "recordings", None) or [])
+
+
 def _emit(args, summary: dict, human: Callable[[dict], str]) -> None:
     if getattr(args, "json", False):
         print(json.dumps(to_jsonable(summary), allow_nan=False))
@@ -69,7 +83,7 @@ def _human_recording(s: dict) -> str:
 def _cmd_demo(args) -> int:
     from .pipeline import run_demo
 
-    s = run_demo(args.out, duration_s=args.duration)
+    s = run_demo(_work(args), duration_s=args.duration)
 
     def human(s):
         lines = [_human_simulate(s, f"{args.out}/pa10_joint2")]
@@ -107,7 +121,7 @@ def _human_simulate(s: dict, out) -> str:
 def _cmd_simulate(args) -> int:
     from .pipeline import run_simulate
 
-    s = run_simulate(args.scenario, args.out, duration_s=args.duration, concealment=not args.no_concealment,
+    s = run_simulate(args.scenario, _work(args), duration_s=args.duration, concealment=not args.no_concealment,
                      images=args.images)
     _emit(args, s, lambda s: _human_simulate(s, args.out))
     return 0
@@ -116,7 +130,7 @@ def _cmd_simulate(args) -> int:
 def _cmd_joints(args) -> int:
     from .pipeline import run_joints
 
-    s = run_joints(args.recording, args.out, method=args.method)
+    s = run_joints(args.recording, _work(args), method=args.method)
 
     def human(s):
         lines = [f"recording {s['recording']}: joint geometry ({s['method']})"]
@@ -146,7 +160,7 @@ def _cmd_joints(args) -> int:
 def _cmd_identify(args) -> int:
     from .pipeline import run_identify
 
-    s = run_identify(args.recordings, args.out, method=args.method, cutoff_hz=args.cutoff, decimate=args.decimate,
+    s = run_identify(args.recordings, _work(args), method=args.method, cutoff_hz=args.cutoff, decimate=args.decimate,
                      validation=args.validation)
 
     def human(s):
@@ -188,7 +202,7 @@ def _cmd_identify(args) -> int:
 def _cmd_discover(args) -> int:
     from .pipeline import run_discover
 
-    s = run_discover(args.recording, args.out, model=args.model, validation=args.validation)
+    s = run_discover(args.recording, _work(args), model=args.model, validation=args.validation)
 
     def human(s):
         lines = [f"discover {s['recording']} against {s['model']}: {s['verdict']}"]
@@ -293,10 +307,27 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
+def _terminate(signum, frame):
+    raise SystemExit(128 + signum)           # unwinds like Ctrl-C: staging directories removed
+
+
 def main(argv: Sequence[str] | None = None) -> int:
+    import signal
+
     parser = build_parser()
     args = parser.parse_args(argv)
     try:
+        previous = signal.signal(signal.SIGTERM, _terminate)
+    except ValueError:                       # not the main thread (an embedding application)
+        previous = None
+    try:
+        if getattr(args, "out", None) is not None:
+            from .io.outdir import check_output_dir, staged_output
+
+            check_output_dir(args.out, _inputs(args))
+            with staged_output(args.out) as stage:
+                args.stage = stage
+                return int(args.func(args))
         return int(args.func(args))
     except InputError as e:
         msg = str(e)
@@ -309,6 +340,16 @@ def main(argv: Sequence[str] | None = None) -> int:
         where = f"{e.filename}: " if getattr(e, "filename", None) else ""
         print(f"mocapfj: error: {where}{e.strerror or e}", file=sys.stderr)
         return 2
+    except KeyboardInterrupt:
+        print("mocapfj: interrupted; nothing was written", file=sys.stderr)
+        return 130
+    except SystemExit as e:
+        if e.code == 128 + signal.SIGTERM:
+            print("mocapfj: terminated; nothing was written", file=sys.stderr)
+        raise
+    finally:
+        if previous is not None:
+            signal.signal(signal.SIGTERM, previous)
 
 
 if __name__ == "__main__":  # pragma: no cover

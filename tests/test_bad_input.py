@@ -71,3 +71,69 @@ def test_a_torque_column_of_zeros(bundle, tmp_path):
                                           (0, "an integer decimation factor >= 1")])
 def test_a_decimation_the_recording_cannot_take(bundle, tmp_path, factor, says):
     _one_line_error(_cli("identify", bundle, "--out", tmp_path / "o", "--decimate", factor), "(decimate)", says)
+
+
+# -- outputs: whole or nothing, never over an input ----------------------------------------------
+
+def _tree(d):
+    return sorted((str(p.relative_to(d)), p.stat().st_size) for p in d.rglob("*"))
+
+
+def test_out_may_not_be_inside_or_contain_an_input(bundle, tmp_path):
+    before = _tree(bundle)
+    _one_line_error(_cli("joints", bundle, "--out", bundle), "--out: path: expected a directory that is not")
+    _one_line_error(_cli("joints", bundle, "--out", bundle / "res"), "expected a directory outside the input bundles")
+    _one_line_error(_cli("joints", bundle / "recording.toml", "--out", bundle.parent), "does not contain an input")
+    assert _tree(bundle) == before
+    # discover --model OUT/model.toml --out OUT would overwrite its own input model
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / ".mocapfj-output").write_text("")
+    (out / "model.toml").write_text("mine\n")
+    _one_line_error(_cli("discover", bundle, "--model", out / "model.toml", "--out", out), "holds the input")
+    assert (out / "model.toml").read_text() == "mine\n"
+
+
+def test_out_holding_other_files_is_refused_and_kept(bundle, tmp_path):
+    out = tmp_path / "mine"
+    out.mkdir()
+    (out / "notes.txt").write_text("keep me\n")
+    _one_line_error(_cli("joints", bundle, "--out", out), "expected a new or empty directory", "holds other files")
+    assert [p.name for p in out.iterdir()] == ["notes.txt"]
+
+
+def test_a_failed_run_leaves_nothing_and_a_second_run_replaces_the_first(bundle, tmp_path):
+    out = tmp_path / "o"
+    r = _cli("identify", bundle, "--out", out, "--decimate", "100000")
+    _one_line_error(r, "(decimate)")
+    assert not out.exists() and list(tmp_path.iterdir()) == []         # no OUT/00_<name>/joints, no staging
+    assert _cli("joints", bundle, "--out", out).returncode == 0
+    first = _tree(out)
+    assert ("joints.json" in {n for n, _ in first}) and ".mocapfj-output" in {n for n, _ in first}
+    assert _cli("joints", bundle, "--out", out).returncode == 0
+    assert _tree(out) == first and sorted(p.name for p in tmp_path.iterdir()) == ["o"]
+
+
+def test_a_killed_runs_staging_directory_is_removed_by_the_next_run(bundle, tmp_path):
+    stale = tmp_path / ".o.999999999.mocapfj-tmp"                      # no such process
+    (stale / "joints").mkdir(parents=True)
+    assert _cli("joints", bundle, "--out", tmp_path / "o").returncode == 0
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["o"]
+
+
+@pytest.mark.parametrize("sig, code, says", [("SIGINT", 130, "interrupted"), ("SIGTERM", 143, "terminated")])
+def test_ctrl_c_and_sigterm_print_one_line_and_leave_nothing(bundle, tmp_path, sig, code, says):
+    import signal
+    import time
+
+    out = tmp_path / "o"
+    p = subprocess.Popen([sys.executable, "-m", "mocapfj.cli", "identify", str(bundle), "--out", str(out)],
+                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    deadline = time.monotonic() + 60
+    while not list(tmp_path.glob(".o.*.mocapfj-tmp")) and p.poll() is None and time.monotonic() < deadline:
+        time.sleep(0.02)
+    assert p.poll() is None, "the run ended before it could be interrupted"
+    p.send_signal(getattr(signal, sig))
+    _, err = p.communicate(timeout=60)
+    assert p.returncode == code and err.count("\n") == 1 and says in err and "Traceback" not in err, err
+    assert list(tmp_path.iterdir()) == []

@@ -49,12 +49,13 @@ def test_real_elbow_as_a_markers_only_bundle(realdata, tmp_path, capsys):
     range is the clusters' relative rotation between the extreme frames, 111.0 deg (its excursion
     from the first frame is the published 88 deg: tests/joints/test_pipeline.py); the upper arm
     moves, so the axis is given in its frame only (axis_world null)."""
-    shutil.copy(realdata / "c3d_samples" / "kinematics_racing_propulsion.c3d", tmp_path / "markers.c3d")
-    (tmp_path / "recording.toml").write_text(
+    (tmp_path / "elbow").mkdir()
+    shutil.copy(realdata / "c3d_samples" / "kinematics_racing_propulsion.c3d", tmp_path / "elbow" / "markers.c3d")
+    (tmp_path / "elbow" / "recording.toml").write_text(
         'format = "mocapfj.recording/1"\nname = "elbow"\n[markers]\nfile = "markers.c3d"\n'
         '[[joints]]\nname = "elbow"\nlink_markers = ["ForearmR1", "ForearmR2", "ForearmR3"]\n'
         'parent_markers = ["ArmR1", "ArmR2", "ArmR3"]\n')
-    assert main(["joints", str(tmp_path), "--out", str(tmp_path / "out"), "--json"]) == 0
+    assert main(["joints", str(tmp_path / "elbow"), "--out", str(tmp_path / "out"), "--json"]) == 0
     (j,) = json.loads(capsys.readouterr().out)["joints"]
     assert j["method"] == "sara" and j["axis_world"] is None and j["parent_static"] is False
     assert abs(j["q_range_deg"] - 111.0) < 1.0 and "no deflection" in j["note"]
