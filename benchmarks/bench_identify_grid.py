@@ -40,6 +40,7 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "benchmarks"))
 
 
 # ------------------------------------------------------------------------------------------ ADAPTER
@@ -89,6 +90,56 @@ def _generate(case, d: Path) -> float | None:
     tic = time.perf_counter()
     write_hinge_bundle(case, d)
     return time.perf_counter() - tic
+
+
+def _bound(case, d: Path) -> dict[str, float]:
+    """The case's Cramér-Rao bound (hinge_bound.py), cached in d/bound.json for its digest."""
+    from hinge_bound import hinge_bound
+
+    from mocapfj.io import read_json, write_json
+    from mocapfj.synth.hinge import case_digest
+
+    f = d / "bound.json"
+    digest = case_digest(case)
+    if f.is_file():
+        got = read_json(f)
+        if got.get("case_sha256") == digest:            # NaN (no gravity) is stored as null
+            return {n: (float("nan") if v is None else float(v)) for n, v in got["bound_pct"].items()}
+    b = hinge_bound(case)
+    write_json(f, {"case_sha256": digest, "bound_pct": b})
+    return b
+
+
+def bound_lines(rows: list[dict]) -> list[str]:
+    """Markdown lines: what the Cramér-Rao bound allows on this grid (rows: {"truth", "bound"})."""
+    from hinge_bound import pass_probability
+
+    n = len(rows)
+    lines = ["### What any estimator can reach: the Cramér-Rao bound", "",
+             "Per case, the bound on each parameter's SD (benchmarks/hinge_bound.py: the case's true signals and "
+             "noise model, with more information than an estimator has, so a lower bound). A parameter whose "
+             "bound is above 5 % must be flagged not determined; an efficient unbiased estimator lands within "
+             "tolerance with the probability its Gaussian at the bound gives.", "",
+             "| parameter | bound above 5 % (must be flagged, % of cases) | median bound (%) | "
+             "expected within tolerance when not flagged (%) |", "|---|---|---|---|"]
+    for p in NAMES:
+        b = np.array([r["bound"][p] for r in rows if math.isfinite(r["bound"][p])])
+        ok = b[b <= 5.0]
+        within = np.mean([math.erf(TOL_PCT[p] / (x * math.sqrt(2))) if x > 0 else 1.0 for x in ok]) if ok.size else float("nan")
+        lines.append(f"| {p} | {_pct(int((b > 5).sum()), b.size)} | {_fmt(float(np.median(b)) if b.size else float('nan'), '.2f')} | "
+                     f"{_fmt(100 * within, '.0f')} |")
+    must = [any(math.isfinite(v) and v > 5.0 for v in r["bound"].values()) for r in rows]
+    probs = [pass_probability(r["bound"], TOL_PCT) for r in rows]
+    lines += ["", f"Some parameter must be flagged in {_pct(sum(must), n)} % of the cases; the expected share of "
+                  f"cases where an efficient estimator passes every parameter (flagging exactly those above 5 %) is "
+                  f"{100 * np.mean(probs):.0f} %.", "", "| family | cases | must flag (%) | expected all pass (%) |",
+              "|---|---|---|---|"]
+    for fam in ("pa10", "cobot", "heavy", "vertical"):
+        idx = [i for i, r in enumerate(rows) if r["truth"]["family"] == fam]
+        if idx:
+            lines.append(f"| {fam} | {len(idx)} | {_pct(sum(must[i] for i in idx), len(idx))} | "
+                         f"{100 * np.mean([probs[i] for i in idx]):.0f} |")
+    return lines + [""]
 
 
 def _estimate_one(bundle: Path, out: Path, method: str) -> dict:
@@ -265,6 +316,8 @@ def main(argv=None) -> int:
     ap.add_argument("--cache", type=Path, default=ROOT / "benchmarks" / ".cache" / "grid")
     ap.add_argument("--write-docs", type=Path, default=None, metavar="PATH",
                     help="write the Markdown report into PATH (between bench_identify_grid markers)")
+    ap.add_argument("--no-bound", dest="bound", action="store_false",
+                    help="skip the Cramér-Rao bound per case (hinge_bound.py; cached in the case's bound.json)")
     args = ap.parse_args(argv)
 
     from mocapfj.io import read_json, write_json
@@ -288,6 +341,12 @@ def main(argv=None) -> int:
         print(f"generation per case: median {np.median(made):.1f} s, max {made.max():.1f} s; "
               f"{np.sum(made) / np.sum(durs):.3f} s per simulated second")
     truths = [read_json(d / "truth.json") for d in dirs]
+    bounds = None
+    if args.bound:
+        tic = time.perf_counter()
+        with ProcessPoolExecutor(args.jobs) as ex:
+            bounds = list(ex.map(_bound, cases, dirs))
+        print(f"Cramér-Rao bounds in {time.perf_counter() - tic:.1f} s wall")
 
     methods = [m.strip() for m in args.methods.split(",") if m.strip()]
     fam_count = {f: sum(t["family"] == f for t in truths) for f in ("pa10", "cobot", "heavy", "vertical")}
@@ -313,11 +372,20 @@ def main(argv=None) -> int:
                   f"{r['result']['seconds']:.1f} | {'yes' if r['score']['all_pass'] else 'no'} | "
                   f"{'ok' if r['result']['error'] is None else r['result']['error'][:80]} |")
         md += summarize(method, rows)
+        if bounds is not None:
+            over = sum(1 for r, b in zip(rows, bounds) for p in NAMES
+                       if r["score"][p]["flagged"] and math.isfinite(b[p]) and b[p] <= 5.0)
+            under = sum(1 for r, b in zip(rows, bounds) for p in NAMES
+                        if not r["score"][p]["flagged"] and r["result"]["error"] is None and math.isfinite(b[p]) and b[p] > 5.0)
+            md += [f"Against the bound: {over} flags on parameters whose bound is at most 5 % (the data could "
+                   f"determine them), {under} parameters reported determined whose bound is above 5 %.", ""]
         all_results[method] = [{"name": r["name"], "family": r["truth"]["family"], "truth": r["truth"]["params"],
                                 "estimates": r["result"]["estimates"], "error": r["result"]["error"],
                                 "seconds": r["result"]["seconds"],
                                 "score": {k: v for k, v in r["score"].items()}} for r in rows]
         write_json(root / "_runs" / method / "results.json", all_results[method])
+    if bounds is not None:
+        md += bound_lines([{"truth": t, "bound": b} for t, b in zip(truths, bounds)])
     text = "\n".join(md)
     print("\n" + text)
     if args.write_docs is not None:

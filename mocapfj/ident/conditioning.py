@@ -5,6 +5,8 @@ the torque together, resampling onto another clock. Every default is overridable
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 from scipy import signal
 
@@ -22,6 +24,14 @@ def _check_rate(fs_hz: float, cutoff_hz: float, what: str) -> None:
         raise InputError(None, what, f"a cut-off between 0 and the Nyquist rate {fs_hz / 2:g} Hz", cutoff_hz)
 
 
+@functools.lru_cache(maxsize=256)
+def _butter_sos(order: int, cutoff_hz: float, fs_hz: float) -> np.ndarray:
+    """The low-pass's second-order sections, designed once per (order, cut-off, rate): output
+    error filters thousands of signals with the same few designs (shared: not to be modified)."""
+    sos = signal.butter(order, cutoff_hz, fs=fs_hz, output="sos")
+    return sos
+
+
 def lowpass(x: np.ndarray, fs_hz: float, cutoff_hz: float, order: int = 4) -> np.ndarray:
     """Zero-phase Butterworth low-pass along axis 0 (forward-backward, so the order doubles).
 
@@ -32,7 +42,7 @@ def lowpass(x: np.ndarray, fs_hz: float, cutoff_hz: float, order: int = 4) -> np
     if np.isnan(x).any():
         raise InputError(None, "x", "a signal without NaN (fill or cut the gaps before filtering)",
                          f"{int(np.isnan(x).sum())} NaN samples")
-    sos = signal.butter(order, cutoff_hz, fs=fs_hz, output="sos")
+    sos = _butter_sos(int(order), float(cutoff_hz), float(fs_hz))
     padlen = min(3 * (2 * len(sos) + 1), x.shape[0] - 1)
     if x.shape[0] < 3 * (2 * len(sos) + 1) + 1:
         raise InputError(None, "x", f"at least {3 * (2 * len(sos) + 1) + 1} samples for an order-{order} filter",

@@ -48,6 +48,7 @@ larger of the two.
 
 from __future__ import annotations
 
+import functools
 import math
 import os
 import time
@@ -287,7 +288,7 @@ class _Data:
         if self.stride == 1:
             return np.asarray(x)[self.iu]
         if self.m > 1:
-            x = resample_poly(x, 1, self.m, axis=0)
+            x = resample_poly(x, 1, self.m, axis=0, window=_decimation_fir(self.m))
         return lowpass(x, self.fs / self.m, self.band)[self.iu_m]
 
     def at_mocap(self, q, w):
@@ -295,6 +296,16 @@ class _Data:
         i = self.i0
         h = self.h if q.ndim == 1 else self.h[:, :, None]
         return h[:, 0] * q[i] + h[:, 1] * w[i] + h[:, 2] * q[i + 1] + h[:, 3] * w[i + 1]
+
+
+@functools.lru_cache(maxsize=32)
+def _decimation_fir(m: int) -> np.ndarray:
+    """The anti-alias FIR of scipy's resample_poly(x, 1, m), designed once per m (it designs it
+    on every call otherwise): firwin(20 m + 1, 1 / m, Kaiser beta 5); shared, not to be modified."""
+    from scipy.signal import firwin
+
+    h = firwin(2 * 10 * m + 1, 1.0 / m, window=("kaiser", 5.0))
+    return h
 
 
 class _Problem:
