@@ -269,6 +269,8 @@ def build_parser() -> argparse.ArgumentParser:
     jn.add_argument("--method", default="auto", choices=["auto", "ml", "halvorsen", "gamage_lasenby", "sara"],
                     help="axis fit (default auto: maximum likelihood, or SARA where the markers do not move as a hinge)")
     jn.add_argument("--json", action="store_true", help="print a JSON summary on stdout")
+    jn.add_argument("--allow-outside-bundle", action="store_true",
+                    help="read files that recording.toml names outside its bundle (../, absolute paths, symlinks)")
     jn.set_defaults(func=_cmd_joints)
 
     idf = sub.add_parser("identify", help="identification of joint dynamics and spring model")
@@ -284,6 +286,8 @@ def build_parser() -> argparse.ArgumentParser:
                      help="rigid robot (no markers): a second recording on which each joint's torque RMS is reported")
     idf.add_argument("--decimate", type=int, default=2, help="parallel decimation factor")
     idf.add_argument("--json", action="store_true", help="print a JSON summary on stdout")
+    idf.add_argument("--allow-outside-bundle", action="store_true",
+                    help="read files that recording.toml names outside its bundle (../, absolute paths, symlinks)")
     idf.set_defaults(func=_cmd_identify)
 
     dc = sub.add_parser("discover", help="locate, name and model what the model misses in a recording")
@@ -293,11 +297,15 @@ def build_parser() -> argparse.ArgumentParser:
                     help="model file (or scenario file) to compare with; default: identified on the spot")
     dc.add_argument("--validation", default=None, help="a second recording on which to prove the fit improves")
     dc.add_argument("--json", action="store_true", help="print a JSON summary on stdout")
+    dc.add_argument("--allow-outside-bundle", action="store_true",
+                    help="read files that recording.toml names outside its bundle (../, absolute paths, symlinks)")
     dc.set_defaults(func=_cmd_discover)
 
     i = sub.add_parser("inspect", help="check and summarise a recording bundle or a C3D/TRC file")
     i.add_argument("recording", help="bundle directory, recording.toml, or marker file")
     i.add_argument("--json", action="store_true", help="print a JSON summary on stdout")
+    i.add_argument("--allow-outside-bundle", action="store_true",
+                    help="read files that recording.toml names outside its bundle (../, absolute paths, symlinks)")
     i.set_defaults(func=_cmd_inspect)
 
     for name, help_text in PLANNED:
@@ -311,6 +319,18 @@ def _terminate(signum, frame):
     raise SystemExit(128 + signum)           # unwinds like Ctrl-C: staging directories removed
 
 
+def _run(args) -> int:
+    """The command, writing into a staging directory beside --out (mocapfj.io.outdir)."""
+    if getattr(args, "out", None) is not None:
+        from .io.outdir import check_output_dir, staged_output
+
+        check_output_dir(args.out, _inputs(args))
+        with staged_output(args.out) as stage:
+            args.stage = stage
+            return int(args.func(args))
+    return int(args.func(args))
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     import signal
 
@@ -321,14 +341,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     except ValueError:                       # not the main thread (an embedding application)
         previous = None
     try:
-        if getattr(args, "out", None) is not None:
-            from .io.outdir import check_output_dir, staged_output
+        if getattr(args, "allow_outside_bundle", False):
+            from .io import files_outside_bundle
 
-            check_output_dir(args.out, _inputs(args))
-            with staged_output(args.out) as stage:
-                args.stage = stage
-                return int(args.func(args))
-        return int(args.func(args))
+            with files_outside_bundle():
+                return _run(args)
+        return _run(args)
     except InputError as e:
         msg = str(e)
         if e.file == "<argument>" and e.field in vars(args):

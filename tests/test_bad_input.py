@@ -137,3 +137,45 @@ def test_ctrl_c_and_sigterm_print_one_line_and_leave_nothing(bundle, tmp_path, s
     _, err = p.communicate(timeout=60)
     assert p.returncode == code and err.count("\n") == 1 and says in err and "Traceback" not in err, err
     assert list(tmp_path.iterdir()) == []
+
+
+# -- files named in recording.toml stay inside the bundle ----------------------------------------
+
+def _name_controller(b, name):
+    t = (b / "recording.toml").read_text()
+    csv = next(b.glob("*.csv")).name
+    (b / "recording.toml").write_text(t.replace(f'file = "{csv}"', f'file = "{name}"'))
+    return csv
+
+
+def test_a_file_outside_the_bundle_is_refused_without_printing_it(bundle, tmp_path):
+    b = _copy(bundle, tmp_path)
+    _name_controller(b, "/etc/passwd")
+    r = _cli("inspect", b)
+    _one_line_error(r, "controller.file: expected a file inside the bundle", "'/etc/passwd', which resolves outside it",
+                    "--allow-outside-bundle")
+    assert "root:" not in r.stderr
+    # ../ and a symlink leading out: refused, and read when the user says so
+    b2 = _copy(bundle, tmp_path / "two")
+    csv = _name_controller(b2, "../log.csv")
+    (b2 / csv).rename(tmp_path / "two" / "log.csv")
+    _one_line_error(_cli("inspect", b2), "'../log.csv', which resolves outside it")
+    assert _cli("inspect", b2, "--allow-outside-bundle").returncode == 0
+    b3 = _copy(bundle, tmp_path / "three")
+    csv = next(b3.glob("*.csv"))
+    csv.rename(tmp_path / "three" / "elsewhere.csv")
+    csv.symlink_to(tmp_path / "three" / "elsewhere.csv")
+    _one_line_error(_cli("inspect", b3), f"'{csv.name}', which resolves outside it")
+
+
+def test_a_bad_cell_is_located_not_echoed(bundle, tmp_path):
+    b = _copy(bundle, tmp_path)
+    csv = next(b.glob("*.csv"))
+    lines = csv.read_text().splitlines()
+    cells = lines[3].split(",")
+    cells[1] = "secret"
+    lines[3] = ",".join(cells)
+    csv.write_text("\n".join(lines) + "\n")
+    r = _cli("inspect", b)
+    _one_line_error(r, "row 4 column", "expected a number, got 6 characters of text")
+    assert "secret" not in r.stderr

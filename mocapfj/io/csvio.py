@@ -40,7 +40,8 @@ def read_csv_columns(path: str | os.PathLike[str]) -> dict[str, np.ndarray]:
         raise InputError(path, "header", "a first row of column names", "an empty file")
     names = [s.strip().strip('"') for s in lines[0].split(",")]
     if any(not s for s in names):
-        raise InputError(path, "header", "a non-empty name for every column", lines[0])
+        raise InputError(path, "header", "a non-empty name for every column",
+                         f"column {names.index('') + 1} of {len(names)} without a name")
     if len(set(names)) != len(names):
         dup = sorted({s for s in names if names.count(s) > 1})
         raise InputError(path, "header", "unique column names", f"duplicates {dup}")
@@ -69,7 +70,8 @@ def _parse_slow(path, names, body) -> np.ndarray:
                 try:
                     out[i, j] = float(cell)
                 except ValueError:
-                    raise InputError(path, f"row {i + 2} column {names[j]!r}", "a number", repr(cell)) from None
+                    raise InputError(path, f"row {i + 2} column {names[j][:40]!r}", "a number",
+                                     f"{len(cell)} characters of text") from None
     return out
 
 

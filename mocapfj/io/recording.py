@@ -7,6 +7,9 @@ renames them. Keys it does not interpret are kept in `Recording.spec` and writte
 
 from __future__ import annotations
 
+import contextlib
+import contextvars
+
 import copy
 import os
 import shutil
@@ -25,6 +28,7 @@ from .tomlio import check_format, read_toml, require, write_toml
 from .trc import read_trc, write_trc
 
 __all__ = [
+    "files_outside_bundle",
     "FORMAT",
     "DEFAULT_DURATION_TOLERANCE_S",
     "load_recording",
@@ -121,8 +125,28 @@ def _parse_joint(path, tab, i, has_markers: bool, has_controller: bool) -> Joint
                      extra={k: v for k, v in tab.items() if k not in _JOINT_KEYS})
 
 
+_OUTSIDE = contextvars.ContextVar("mocapfj_files_outside_bundle", default=False)
+
+
+@contextlib.contextmanager
+def files_outside_bundle(allowed: bool = True):
+    """Within this block, :func:`load_recording` reads files that recording.toml names outside its
+    bundle (``../``, absolute paths, symlinks leading out); the CLI's ``--allow-outside-bundle``."""
+    token = _OUTSIDE.set(bool(allowed))
+    try:
+        yield
+    finally:
+        _OUTSIDE.reset(token)
+
+
 def _bundle_file(root: Path, toml_path: Path, field: str, name: str) -> Path:
+    """The file `name` of recording.toml's `field`, inside the bundle: resolved (symlinks
+    followed) it must lie under the bundle's own resolved directory, unless allowed
+    (:func:`files_outside_bundle`). The message names the path given, never the file's text."""
     p = root / name
+    if not _OUTSIDE.get() and not p.resolve().is_relative_to(root.resolve()):
+        raise InputError(toml_path, field, f"a file inside the bundle {root}", f"{name!r}, which resolves outside it",
+                         hint="pass --allow-outside-bundle to read files elsewhere")
     if not p.is_file():
         raise InputError(toml_path, field, f"an existing file inside {root}", f"{name!r} (no such file)")
     return p

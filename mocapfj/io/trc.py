@@ -30,7 +30,7 @@ def read_trc(path: str | os.PathLike[str]) -> MarkerTrajectories:
         raise InputError(path, "file", "an existing TRC file", "no such file")
     lines = path.read_text(encoding="utf-8", errors="replace").splitlines()
     if len(lines) < 5 or not lines[0].startswith("PathFileType"):
-        raise InputError(path, "line 1", "a TRC header starting with 'PathFileType'", repr(lines[0][:40]) if lines else "an empty file")
+        raise InputError(path, "line 1", "a TRC header starting with 'PathFileType'", "another first line" if lines else "an empty file")
     keys = [k.strip() for k in lines[1].split("\t")]
     vals = [v.strip() for v in lines[2].split("\t")]
     header = dict(zip(keys, vals + [""] * (len(keys) - len(vals))))
@@ -78,7 +78,8 @@ def _parse_rows(path, body: list[str], n_cols: int) -> np.ndarray:
                 try:
                     float(cell)
                 except ValueError:
-                    raise InputError(path, f"row {i + 6} column {j + 1}", "a number", repr(cell.strip())) from None
+                    raise InputError(path, f"row {i + 6} column {j + 1}", "a number",
+                                     f"{len(cell.strip())} characters of text") from None
         raise
 
 

@@ -75,5 +75,5 @@ def test_non_monotonic_time(tmp_path):
 def test_not_a_number(tmp_path):
     p = tmp_path / "n.trc"
     p.write_text(HEADER.format(units="mm") + "1\t0.00\t1\tabc\t3\t4\t5\t6\n")
-    with pytest.raises(InputError, match=r"n\.trc: row 6 column 4: expected a number, got 'abc'"):
+    with pytest.raises(InputError, match=r"n\.trc: row 6 column 4: expected a number, got 3 characters of text"):
         read_trc(p)
