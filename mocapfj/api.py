@@ -82,7 +82,8 @@ def _urdf_chain(rec: Recording) -> bool:
     return tuple(load_pin_model(rec.urdf).names[1:]) == tuple(j.name for j in rec.joints)
 
 
-def _identify_recording(rec: Recording, method: str, cutoff_hz, decimate: int, calibration=None) -> tuple[list, dict | None]:
+def _identify_recording(rec: Recording, method: str, cutoff_hz, decimate: int, calibration=None,
+                        fit_clock_offset: bool = False) -> tuple[list, dict | None]:
     """(IdentifiedJoint per joint, the n-link base-parameter summary or None)."""
     from .ident.joint import identify_signals
     from .ident.nlink import identify_nlink_joints
@@ -99,7 +100,7 @@ def _identify_recording(rec: Recording, method: str, cutoff_hz, decimate: int, c
     for name, s in sig.items():
         try:
             out.append(identify_signals(s, gear_ratio=gear[name], recording=rec.name, method=method,
-                                        cutoff_hz=cutoff_hz, decimate=decimate))
+                                        cutoff_hz=cutoff_hz, decimate=decimate, fit_clock_offset=fit_clock_offset))
         except InputError as e:
             raise InputError(rec.root, f"joints[{name}] ({e.field})", e.expected, e.got, e.hint) from None
     return out, None
@@ -107,7 +108,7 @@ def _identify_recording(rec: Recording, method: str, cutoff_hz, decimate: int, c
 
 def identify(recordings: RecordingLike | Sequence[RecordingLike], *, method: str = "output_error",
              cutoff_hz: float | None = None, decimate: int = 2, validation: RecordingLike | None = None,
-             calibrations: Sequence | None = None):
+             calibrations: Sequence | None = None, fit_clock_offset: bool = False):
     """Identify every joint of one or more recordings: an :class:`mocapfj.ident.Identification`.
 
     A recording with markers and a controller log: each joint's link angle from the joints stage,
@@ -116,6 +117,9 @@ def identify(recordings: RecordingLike | Sequence[RecordingLike], *, method: str
     2007, Table I). A recording without markers, with a URDF: rigid n-link identification from
     the controller log (:func:`mocapfj.ident.rigid.identify_rigid`), checked on `validation` when
     given. `calibrations`: the JointsResult of each recording, when already computed.
+    `fit_clock_offset`: output error identifies an offset between the mocap and controller clocks
+    with the dynamics and applies it (by default it is tested, reported, and the parameters it
+    moves are flagged not determined).
     """
     from .ident.joint import IDENTIFY_METHODS
     from .ident.result import Identification, summarize_trials
@@ -141,7 +145,7 @@ def identify(recordings: RecordingLike | Sequence[RecordingLike], *, method: str
     trials, nlink = [], []
     for i, rec in enumerate(recs):
         cal = calibrations[i] if calibrations is not None else None
-        joint_results, nl = _identify_recording(rec, method, cutoff_hz, decimate, cal)
+        joint_results, nl = _identify_recording(rec, method, cutoff_hz, decimate, cal, fit_clock_offset)
         trials += joint_results
         if nl is not None:
             nlink.append(nl)

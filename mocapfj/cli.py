@@ -161,7 +161,7 @@ def _cmd_identify(args) -> int:
     from .pipeline import run_identify
 
     s = run_identify(args.recordings, _work(args), method=args.method, cutoff_hz=args.cutoff, decimate=args.decimate,
-                     validation=args.validation)
+                     validation=args.validation, fit_clock_offset=args.fit_clock_offset)
 
     def human(s):
         lines = [f"identified {len(s['recordings'])} recording(s)"]
@@ -185,6 +185,12 @@ def _cmd_identify(args) -> int:
                     if "cond_two_step" in j else "")
             lines.append(f"    method {j['method']}, spring {j['spring']['model']}{cond}, torque RMS "
                          f"{j['torque_rms']:.3g} N m, {j['frames_filled']} angle frames filled")
+            clk = j.get("clock_offset") or {}
+            if clk.get("found"):
+                lines.append(f"    clock offset: the mocap {abs(clk['offset_s']) * 1e3:.3g} +- {clk['sd_s'] * 1e3:.2g} ms "
+                             f"{'behind' if clk['offset_s'] > 0 else 'ahead of'} the controller log (chi-square "
+                             f"{clk['chi2']:.0f}), " + ("applied (--fit-clock-offset)" if clk["applied"] else
+                                                       "not declared: what it moves is flagged below"))
             for n, why in j.get("not_determined", {}).items():
                 lines.append(f"    {n} not determined: {why}")
         if "nlink" in s:
@@ -285,6 +291,9 @@ def build_parser() -> argparse.ArgumentParser:
     idf.add_argument("--validation", default=None,
                      help="rigid robot (no markers): a second recording on which each joint's torque RMS is reported")
     idf.add_argument("--decimate", type=int, default=2, help="parallel decimation factor")
+    idf.add_argument("--fit-clock-offset", action="store_true",
+                     help="output_error: identify an offset between the mocap and controller clocks with the "
+                          "dynamics and apply it (by default it is tested and reported, and what it moves is flagged)")
     idf.add_argument("--json", action="store_true", help="print a JSON summary on stdout")
     idf.add_argument("--allow-outside-bundle", action="store_true",
                     help="read files that recording.toml names outside its bundle (../, absolute paths, symlinks)")

@@ -54,7 +54,7 @@ def _longer(rel_pct: float, duration_s: float) -> str:
 
 
 def judge_parameters(names, values, std, cov, *, duration_s: float, context: dict | None = None,
-                     at_bound=()) -> dict[str, Parameter]:
+                     at_bound=(), suspect: dict[str, str] | None = None) -> dict[str, Parameter]:
     """Parameters (name -> :class:`~.result.Parameter`) of the eight of Lightcap and Banks (2007),
     eq. (4), each determined or not with its reason (module docstring).
 
@@ -65,6 +65,8 @@ def judge_parameters(names, values, std, cov, *, duration_s: float, context: dic
         v q' / k and I q'' / k along the motion), ``motor_noise_rad`` and ``split_noise_chi2``
         (output error: the motor angle's noise and how strongly it pulls on the inertia split).
     at_bound : names held at a bound of zero by the estimator.
+    suspect : {name: reason} of parameters a finding outside the fit puts in doubt (an undeclared
+        clock offset that moves them): not determined, with that reason.
     """
     ctx = context or {}
     idx = {n: i for i, n in enumerate(names)}
@@ -130,5 +132,7 @@ def judge_parameters(names, values, std, cov, *, duration_s: float, context: dic
                 else:
                     reason = (f"relative SD {rel:.3g} % above {UNDETERMINED_REL_STD_PCT:g} %: its torque is near the "
                               f"noise along this motion; {_longer(rel, duration_s)}")
+        if reason is None and suspect and n in suspect:
+            reason = suspect[n]
         out[n] = Parameter(n, v, s, determined=reason is None, reason=reason)
     return out

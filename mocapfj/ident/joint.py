@@ -98,7 +98,26 @@ def _motor_first_values(mf):
     return values, {"motor": mf.motor, "link": mf.link}, mf.motor.residual_rms, mf.q_zero_rad
 
 
-def _output_error_joint(t, q, q_m, u, fs_hz, decimate, models, measured, controller, cond):
+def _clock_reasons(clock: dict | None, values: dict) -> dict[str, str]:
+    """{name: reason} for the parameters an undeclared clock offset moves (output error's test)."""
+    if not clock or not clock["found"] or clock["applied"]:
+        return {}
+    ms, sd = 1e3 * clock["offset_s"], 1e3 * clock["sd_s"]
+    out = {}
+    for n, shift in clock["moves"].items():
+        v = values.get(n)
+        per = clock.get("per_ms", {}).get(n, 0.0)
+        how = (f"{100 * shift / abs(v):+.3g} % ({100 * per / abs(v):+.3g} % per millisecond of offset)" if v
+               else f"{shift:+.3g}")
+        out[n] = (f"the recording fits far better (chi-square {clock['chi2']:.0f}) with the mocap {abs(ms):.3g} +- "
+                  f"{sd:.2g} ms {'behind' if ms > 0 else 'ahead of'} the controller log than with the declared "
+                  f"synchronisation; that offset moves {n} by {how}: a clock offset between the streams (or a "
+                  "delay in the log) shows like this; declare it ([markers] clock_offset_s) or identify it with the "
+                  "dynamics (--fit-clock-offset)")
+    return out
+
+
+def _output_error_joint(t, q, q_m, u, fs_hz, decimate, models, measured, controller, cond, fit_clock_offset=False):
     """The output-error branch of :func:`identify_joint`: (parameters, spring, stages, torque RMS,
     q zero, extra JSON, friction smoothing); adds its condition number to `cond`.
 
@@ -115,7 +134,8 @@ def _output_error_joint(t, q, q_m, u, fs_hz, decimate, models, measured, control
 
     hysteretic = any(m in models for m in HYSTERETIC)
     oe = identify_output_error(t, q, q_m, u, fs_hz=fs_hz, measured=measured, controller=controller,
-                               test_cubic="cubic" in models, test_hysteresis=hysteretic)
+                               test_cubic="cubic" in models, test_hysteresis=hysteretic,
+                               fit_clock_offset=fit_clock_offset)
     f = oe.fit
     if oe.hysteresis is not None and hysteretic:
         try:
@@ -135,11 +155,15 @@ def _output_error_joint(t, q, q_m, u, fs_hz, decimate, models, measured, control
                "deflection_inertial_rad": float(np.std(f["I"] * qdd) / f["k"]),
                "motor_noise_rad": oe.motor_noise_rad, "split_noise_chi2": oe.split_noise_chi2}
     values = judge_parameters(f.names, f.values, f.std, f.cov, duration_s=float(t[-1] - t[0]), context=context,
-                              at_bound=oe.at_bound)
+                              at_bound=oe.at_bound, suspect=_clock_reasons(oe.clock, dict(zip(f.names, f.values))))
     extra = {"combinations": {k: {"value": v, "std": sd} for k, (v, sd) in
                               combinations(f.names, f.values, f.cov).items()},
              "friction_law": {"law": "tanh" if oe.friction_scale > 0 else "sign", "eps_rad_s": oe.friction_scale},
              "band_hz": oe.band_hz, "residual_sd": {"q_rad": oe.sigma_q, "u_Nm": oe.sigma_u}}
+    if oe.clock is not None:
+        extra["clock_offset"] = {"offset_s": oe.clock["offset_s"], "sd_s": oe.clock["sd_s"], "chi2": oe.clock["chi2"],
+                                 "found": oe.clock["found"], "applied": oe.clock["applied"],
+                                 "moves": oe.clock["moves"], "per_ms": oe.clock.get("per_ms", {})}
     if oe.hysteresis is not None and hysteretic:
         h = oe.hysteresis
         spring = SpringResult(model="bouc_wen", params={"k": f["k"], "alpha": h["alpha"], "beta": h["beta"],
@@ -164,7 +188,8 @@ MIN_DECIMATED = 200
 
 def identify_joint(t, q, q_m, u, *, fs_hz: float, method: str = "output_error", cutoff_hz: float | None = None,
                    decimate: int = 2, spring_models=None, name: str = "", gear_ratio: float = 1.0,
-                   frames_filled: int = 0, recording: str = "", measured=None, controller=None) -> IdentifiedJoint:
+                   frames_filled: int = 0, recording: str = "", measured=None, controller=None,
+                   fit_clock_offset: bool = False) -> IdentifiedJoint:
     """Identify one joint from its signals on one clock (docs/identification.md).
 
     Parameters
@@ -186,6 +211,8 @@ def identify_joint(t, q, q_m, u, *, fs_hz: float, method: str = "output_error", 
         True where q was measured, False where a gap was filled (output error leaves those out).
     controller : (t_c, q_m_c, u_c, fs_c_hz), optional
         The controller's own samples over the same span (output error compares the torque there).
+    fit_clock_offset : output error: identify an offset between the mocap and controller clocks
+        with the dynamics and apply it (by default it is only tested and reported).
     """
     from .twostep import identify_two_step
 
@@ -219,7 +246,7 @@ def identify_joint(t, q, q_m, u, *, fs_hz: float, method: str = "output_error", 
         raise InputError(None, "spring_models", f"names from {sorted(SPRING_FITTERS)}", unknown)
     if method == "output_error":
         values, spring, stages, torque_rms, q_zero, extra, smoothing = _output_error_joint(
-            t, q, q_m, u, fs_hz, decimate, models, measured, controller, cond)
+            t, q, q_m, u, fs_hz, decimate, models, measured, controller, cond, fit_clock_offset)
     elif method == "two_step":
         values = {n: Parameter(n, two.step1[n], two.step1.std_of(n)) for n in PARAMETER_NAMES if n != "k"}
         values["k"] = Parameter("k", two.spring["k"], two.spring.std_of("k"))

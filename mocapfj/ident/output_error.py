@@ -52,7 +52,7 @@ import functools
 import math
 import os
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy.signal import lfilter, resample_poly
@@ -93,6 +93,16 @@ AMBIGUITY_CHI2 = 25.0
 profile through both (five SDs apart at this cost) is what the data leave open."""
 SPLIT_STARTS = (0.1, 0.3, 0.5, 0.7, 0.9)
 """Link shares I / (I + J) the searches over the inertia split start from."""
+CLOCK_CHI2 = 25.0
+"""An offset between the mocap and controller clocks, fitted with the dynamics, is reported when it
+lowers the whitened cost by this much (five SDs) and is three of its SDs from zero."""
+CLOCK_MIN_S = 1e-3
+"""...and is at least this large: a quarter of a 250 Hz mocap frame, the accuracy of an ordinary
+hardware sync. A mocap angle shifted by dt looks like the link's viscous lag v q' / k with
+v = k dt, which only the torque tells apart; below a millisecond a small error of the link
+model (pa10_joint2: an apparent -0.67 ms) shifts it as readily as the clocks do."""
+CLOCK_MAX_S = 0.2
+"""The largest clock offset the test fits, s."""
 LINK_BAND_FRACTION = 0.6
 """The comparison band's upper limit as a fraction of the link's resonance sqrt(k / I) / 2 pi."""
 
@@ -132,6 +142,9 @@ class OutputErrorResult:
     split_noise_chi2 : how much that noise's expected share of the whitened cost changes over
         link shares I / (I + J) of 0.02-0.98 (:func:`drive_noise_cost`).
         Above SPLIT_NOISE_CHI2 the SDs of I and J are those of a split uniform over I + J.
+    clock : the clock-offset test (:func:`_clock_offset_fit`): {"offset_s", "sd_s", "chi2" (the
+        cost's drop), "found", "applied", "moves" ({name: how far the offset moves it}, when found
+        and not applied)}, or None when not tested.
     """
 
     fit: LSResult
@@ -155,6 +168,7 @@ class OutputErrorResult:
     spring_r2: float = float("nan")
     motor_noise_rad: float = 0.0
     split_noise_chi2: float = 0.0
+    clock: dict | None = None
 
     def __getitem__(self, name: str) -> float:
         return self.fit[name]
@@ -259,8 +273,8 @@ class _Data:
         i = np.minimum(np.floor(pos[inside]).astype(np.int64), t_c.size - 2)
         s = pos[inside] - i
         self.i0 = i
-        self.h = np.column_stack([2 * s**3 - 3 * s**2 + 1, (s**3 - 2 * s**2 + s) / fs_c, -2 * s**3 + 3 * s**2,
-                                  (s**3 - s**2) / fs_c])
+        self.pos = pos[inside]
+        self.h = self._hermite(s)
         self.fs_q = 1.0 / float(np.median(np.diff(t_q)))
         self.stride_q = max(1, int(self.fs_q // (2.5 * self.band))) if self.band < 0.4 * self.fs_q else 1
         edge_q = int(np.ceil(2.0 * self.fs_q / self.band)) if self.stride_q > 1 else 0
@@ -291,10 +305,22 @@ class _Data:
             x = resample_poly(x, 1, self.m, axis=0, window=_decimation_fir(self.m))
         return lowpass(x, self.fs / self.m, self.band)[self.iu_m]
 
-    def at_mocap(self, q, w):
-        """q (T_c, ...) and w its derivative at the mocap instants (cubic Hermite)."""
-        i = self.i0
-        h = self.h if q.ndim == 1 else self.h[:, :, None]
+    def _hermite(self, s):
+        fs_c = self.fs
+        return np.column_stack([2 * s**3 - 3 * s**2 + 1, (s**3 - 2 * s**2 + s) / fs_c, -2 * s**3 + 3 * s**2,
+                                (s**3 - s**2) / fs_c])
+
+    def at_mocap(self, q, w, dt: float = 0.0):
+        """q (T_c, ...) and w its derivative at the mocap instants (cubic Hermite), or at those
+        instants + dt s on the controller's clock (an undeclared clock offset)."""
+        if dt == 0.0:
+            i, h = self.i0, self.h
+        else:
+            pos = self.pos + dt * self.fs
+            i = np.clip(np.floor(pos).astype(np.int64), 0, q.shape[0] - 2)
+            h = self._hermite(np.clip(pos - i, 0.0, 1.0))
+        if q.ndim > 1:
+            h = h[:, :, None]
         return h[:, 0] * q[i] + h[:, 1] * w[i] + h[:, 2] * q[i + 1] + h[:, 3] * w[i + 1]
 
 
@@ -324,6 +350,7 @@ class _Problem:
         self.set_noise(noise or ((np.array([1.0]), 1.0), (np.array([1.0]), 1.0)))
         self._cache = (None, None)
         self._x = np.zeros(len(OE_NAMES))
+        self.dt = 0.0                 # the mocap instants' offset on the controller clock, s
 
     def set_noise(self, noise):
         """noise = ((a_q, sd_q), (a_u, sd_u)): the whitening filters and innovation SDs."""
@@ -363,7 +390,7 @@ class _Problem:
             # the simulation diverged at a trial step (a stiff, light link at the edge of the
             # kernel's stability): a residual the optimiser rejects, not a crash
             return np.full(self.d.q.shape, 1.0), np.full(self.d.u_b.shape, 1e3 * (np.abs(self.d.u_b).max() + 1.0))
-        r_q = self.d.q - self.d.q_band(self.d.at_mocap(q_s, w_s)) - x[_IDX["z"]]
+        r_q = self.d.q - self.d.q_band(self.d.at_mocap(q_s, w_s, self.dt)) - x[_IDX["z"]]
         r_u = self.d.u_b - (x[_IDX["J"]] * self.d.qdd_b + x[_IDX["b"]] * self.d.qd_b + self._spring_b(x, q_s))
         return r_q, r_u
 
@@ -388,7 +415,7 @@ class _Problem:
         q_s, w_s, Sq, Sw = self._link(x, sens=True)           # d q_sim / d (link parameters, eps, k3)
         if not (np.isfinite(Sq).all() and np.isfinite(Sw).all() and np.isfinite(q_s).all()):
             raise FloatingPointError("the link's simulation diverged")
-        Sm = self.d.q_band(self.d.at_mocap(Sq, Sw))
+        Sm = self.d.q_band(self.d.at_mocap(Sq, Sw, self.dt))
         delta = self.d.q_m - q_s
         k, k3 = x[_IDX["k"]], x[_IDX["k3"]]
         cols = [j for j, n in enumerate(_SENS) if self.free[_IDX[n]]]         # only what is fitted
@@ -537,6 +564,7 @@ def _encoder_noise_shift(q_m_c, fs_c, u_c, t_c, t, q, measured, trim_s, band, la
     for _ in range(replicates):
         d2 = _Data(t_c, q_m_c + rng.normal(0.0, sm, q_m_c.size), u_c, fs_c, t, q, measured, trim_s, band)
         p2 = _Problem(d2, law, scale, noise, cubic=prob.cubic)
+        p2.dt = prob.dt
         J = p2.jac_full(x)[:, free]
         r = p2.fun(x[p2.free])
         sc = np.linalg.norm(J, axis=0)
@@ -575,9 +603,11 @@ def _wiener_drive_shift(q_m_c, fs_c, u_c, t_c, t, q, measured, trim_s, band, law
     noise = ((prob.a_q, prob.s_q), (prob.a_u, prob.s_u))
     search = _Problem(d2, law, scale, noise, max_phase=0.15, cubic=prob.cubic)
     search.free = prob.free & free
+    search.dt = prob.dt
     best = _search_split(x, lambda xs: _solve(search, xs, 8, 1e-6)[:2])
     p2 = _Problem(d2, law, scale, noise, cubic=prob.cubic)
     p2.free = search.free
+    p2.dt = prob.dt
     x2, _, _ = _solve(p2, best[1], 20, 1e-8)
     return np.where(free, x2 - x, 0.0)
 
@@ -675,6 +705,73 @@ def _hysteresis_test(prob: _Problem, x, threshold: float = HYSTERESIS_CHI2) -> d
     return best
 
 
+def _clock_scan(prob: _Problem, x, step_s: float = 5e-4) -> float:
+    """The offset dt (|dt| <= CLOCK_MAX_S) that best aligns the simulated link at x with the mocap
+    angle (least squares over the measured samples, the zero refitted), on a grid of `step_s`
+    refined by a parabola: one simulation, the comparison shifted."""
+    d = prob.d
+    q_s, w_s = prob.simulate(np.asarray(x, dtype=np.float64))
+    keep = ~d.filled
+    grid = np.arange(-CLOCK_MAX_S, CLOCK_MAX_S + step_s / 2, step_s)
+    ssr = np.empty(grid.size)
+    for i, dt in enumerate(grid):                # ~800 shifts of one simulated series (interpolations)
+        r = (d.q - d.q_band(d.at_mocap(q_s, w_s, float(dt))))[keep]
+        ssr[i] = float(np.sum((r - r.mean()) ** 2))
+    k = int(np.argmin(ssr))
+    if 0 < k < grid.size - 1:
+        a, b, c = ssr[k - 1], ssr[k], ssr[k + 1]
+        den = a - 2 * b + c
+        if den > 0:
+            return float(grid[k] + 0.5 * step_s * (a - c) / den)
+    return float(grid[k])
+
+
+def _clock_offset_fit(prob: _Problem, x, budget: int = 30) -> tuple:
+    """The fit with an offset dt between the two clocks free: the mocap angle at t is the link's
+    at t + dt on the controller's clock (the link lags the motor physically, so a stream that
+    lags or leads shows as a phase the dynamics cannot make). From x, all of prob's free parameters
+    refitted with it, dt starting at prob.dt: (x with dt, dt s, its SD s, the whitened cost's drop,
+    d x / d dt (n,): how the other parameters move with the offset, from the joint covariance)."""
+    from scipy.optimize import least_squares
+
+    d = prob.d
+    p2 = _Problem(d, prob.law, prob.scale, ((prob.a_q, prob.s_q), (prob.a_u, prob.s_u)), cubic=prob.cubic)
+    p2.free = prob.free.copy()
+    f = p2.free
+    lo, hi = _bounds()
+    x = np.asarray(x, dtype=np.float64)
+    xf = np.minimum(np.maximum(x[f], lo[f] + 1e-6 * prob.scale[f]), np.where(np.isfinite(hi[f]), 0.999 * hi[f], np.inf))
+    p2._x = x.copy()
+    zeros_u = np.zeros(d.u_b.shape)
+
+    def fun(v):
+        p2.dt = float(v[-1])
+        return p2.fun(v[:-1])
+
+    def jac(v):
+        p2.dt = float(v[-1])
+        J = p2.jac(v[:-1])
+        q_s, w_s = p2.simulate(p2.full(v[:-1]))
+        col_q = -d.q_band(d.at_mocap(w_s, np.gradient(w_s) * d.fs, p2.dt))
+        return np.column_stack([J, np.concatenate(p2._white(col_q, zeros_u))])
+
+    dt0 = float(prob.dt)
+    r0 = fun(np.concatenate([xf, [dt0]]))
+    res = least_squares(fun, np.concatenate([xf, [dt0]]), jac=jac, method="trf", x_scale="jac",
+                        bounds=(np.concatenate([lo[f], [dt0 - CLOCK_MAX_S]]), np.concatenate([hi[f], [dt0 + CLOCK_MAX_S]])),
+                        ftol=1e-8, xtol=1e-10, gtol=1e-10, max_nfev=budget)
+    Jm = jac(res.x)
+    sc = np.linalg.norm(Jm, axis=0)
+    sc[sc == 0] = 1.0
+    s2 = max(float(res.fun @ res.fun) / max(res.fun.size - res.x.size, 1), 1.0)
+    cov = np.linalg.pinv((Jm / sc).T @ (Jm / sc)) / np.outer(sc, sc) * s2
+    slope = np.zeros(len(OE_NAMES))
+    if cov[-1, -1] > 0:
+        slope[f] = cov[:-1, -1] / cov[-1, -1]
+    return p2.full(res.x[:-1]), float(res.x[-1]), float(np.sqrt(max(cov[-1, -1], 0.0))), \
+        float(r0 @ r0 - res.fun @ res.fun), slope
+
+
 def _noise_models(prob: _Problem, x) -> tuple:
     """Whitening filters and innovation SDs of both residuals at x."""
     r_q, r_u = prob.raw(x)
@@ -696,7 +793,8 @@ def identify_output_error(t, q, q_m, u, *, fs_hz: float, measured=None, controll
                           band_hz: float | None = None, trim_s: float = 1.0,
                           friction_scales=FRICTION_SCALES, x0=None, max_nfev: int = 40,
                           link_band_fraction: float = LINK_BAND_FRACTION, test_cubic: bool = True,
-                          test_hysteresis: bool = True) -> OutputErrorResult:
+                          test_hysteresis: bool = True, test_clock: bool = True,
+                          fit_clock_offset: bool = False, clock_offset_s: float = 0.0) -> OutputErrorResult:
     """Identify I, mglx, mgly, c, v, J, b, k (and the mocap zero z) by output error (module
     docstring).
 
@@ -719,6 +817,13 @@ def identify_output_error(t, q, q_m, u, *, fs_hz: float, measured=None, controll
     friction_scales : starting values of the tanh law's eps / RMS motor velocity (FRICTION_SCALES).
     x0 : (9,) start in OE_NAMES order; default from a rigid sum equation and the deflection.
     max_nfev : least-squares evaluations per fit.
+    test_clock : fit an undeclared offset between the two clocks with the dynamics (the mocap
+        angle at t taken as the link's at t + dt): reported in ``clock``; when it is found (cost
+        drop CLOCK_CHI2, three SDs from zero) the parameters it moves by more than their SD are
+        listed in ``clock["moves"]`` (not determined under the declared synchronisation).
+    fit_clock_offset : apply the fitted offset when found: the result is the identification with it.
+    clock_offset_s : an offset (s) applied throughout: the mocap angle at t is the link's at
+        t + clock_offset_s on the controller's clock.
 
     Raises
     ------
@@ -762,13 +867,15 @@ def identify_output_error(t, q, q_m, u, *, fs_hz: float, measured=None, controll
             datas[b_hz] = _Data(t_c, q_m_c, u_c, fs_c, t, q, measured, trim_s, b_hz)
         return datas[b_hz]
 
-    def fit(b_hz, law, x_start, noise=None, budget=max_nfev, coarse=False, cubic=False, search=False):
+    def fit(b_hz, law, x_start, noise=None, budget=max_nfev, coarse=False, cubic=False, search=False,
+            dt=clock_offset_s):
         """One fit in band b_hz under `law`. noise None: weighted by the residuals' SDs (no
         whitening); "white": that, then whitened by the residuals' autoregressive models; or the
         given models. coarse or search: a 3x coarser simulation and a looser tolerance (the
         searches before the final fit)."""
         nonlocal nfev
         prob = _Problem(data_at(b_hz), law, scale, max_phase=0.15 if coarse or search else 0.05, cubic=cubic)
+        prob.dt = dt
         ftol = 1e-6 if coarse or search else 1e-10
         if noise is None or noise == "white":
             r_q, r_u = prob.raw(x_start)
@@ -866,6 +973,52 @@ def identify_output_error(t, q, q_m, u, *, fs_hz: float, measured=None, controll
         elif nonlinear:
             prob, x, cost = pc, xc, cc
             others = []
+    clock = None
+    if test_clock:
+        # an undeclared offset between the clocks: the best alignment of the simulated link with
+        # the mocap angle (a scan, robust to a large offset), every parameter refitted locally
+        # with it and the offset fitted jointly for its SD; the cost drop under one noise model
+        dt0 = _clock_scan(prob, x)
+        if abs(dt0) < CLOCK_MIN_S / 2:
+            # aligned already: the joint fit from here, under this fit's noise model
+            _, dt_abs, sd_dt, chi2, slope = _clock_offset_fit(prob, x)
+        else:
+            p_dt, x_loc, _ = fit(band, law, x, "white", 40, cubic=prob.cubic, dt=clock_offset_s + dt0)
+            x_loc, dt_abs, sd_dt, _, slope = _clock_offset_fit(p_dt, x_loc)
+            p_dt.dt = dt_abs
+            cost_dt = float(np.sum(p_dt.fun(x_loc[p_dt.free]) ** 2))
+            p_0 = _Problem(data_at(band), law, scale, ((p_dt.a_q, p_dt.s_q), (p_dt.a_u, p_dt.s_u)), cubic=prob.cubic)
+            p_0.free, p_0.dt = p_dt.free.copy(), clock_offset_s
+            _, cost_0, n = _solve(p_0, x, 20, 1e-8)
+            nfev += n
+            chi2 = cost_0 - cost_dt
+        dt = dt_abs - clock_offset_s
+        clock = {"offset_s": dt, "sd_s": sd_dt, "chi2": chi2, "applied": False,
+                 "found": bool(chi2 > CLOCK_CHI2 and abs(dt) > 3 * sd_dt and abs(dt) > CLOCK_MIN_S), "moves": {},
+                 "per_ms": {}}
+        if _DEBUG:
+            print(f"clock offset scan {1e3 * dt0:+.2f} ms, fit {1e3 * dt:+.3f} +- {1e3 * sd_dt:.3f} ms, chi2 {chi2:.1f}")
+        if clock["found"]:
+            # the whole identification again with the offset (the friction law and the splits can
+            # change with it; a local refit from here can stop in the declared fit's valley)
+            again = identify_output_error(t, q, q_m, u, fs_hz=fs_hz, measured=measured, controller=controller,
+                                          band_hz=band_hz, trim_s=trim_s, friction_scales=friction_scales, x0=x0,
+                                          max_nfev=max_nfev, link_band_fraction=link_band_fraction,
+                                          test_cubic=test_cubic, test_hysteresis=test_hysteresis, test_clock=False,
+                                          clock_offset_s=dt_abs)
+            if fit_clock_offset:
+                # the offset is known to about CLOCK_MIN_S (the link model's accuracy in time), and
+                # the viscous split moves with it (v ~ k dt): that uncertainty joins the SDs
+                sig = max(sd_dt, CLOCK_MIN_S)
+                f0 = again.fit
+                add = np.nan_to_num(slope) * sig
+                cov = f0.cov + np.outer(add, add)
+                std = np.sqrt(f0.std ** 2 + add ** 2)
+                with np.errstate(invalid="ignore", divide="ignore"):
+                    rel = np.where(f0.values != 0, 100.0 * std / np.abs(f0.values), np.nan)
+                return replace(again, fit=replace(f0, std=std, cov=cov, rel_std_pct=rel),
+                               clock=dict(clock, applied=True), n_iter=again.n_iter + nfev)
+            shift = again.fit.values - x
     data = datas[band]
     eps = float(x[_IDX["eps"]])
     r = prob.fun(x[prob.free])
@@ -951,6 +1104,12 @@ def identify_output_error(t, q, q_m, u, *, fs_hz: float, measured=None, controll
         print(f"motor noise {sigma_m:.3g} rad, split noise chi2 {split_chi2:.1f}")
         if sigma_m > 0:
             print("noise pull", dict(zip(OE_NAMES, np.round(noise_pull, 5))))
+    if clock is not None and clock["found"]:
+        # what the offset moves: the identification with it against this one, and what a
+        # millisecond of it moves (it is known to about CLOCK_MIN_S: the link model's accuracy in time)
+        moved = free & ((np.abs(shift) > np.sqrt(var)) | (np.abs(slope) * CLOCK_MIN_S > np.sqrt(var)))
+        clock["moves"] = {n: float(shift[i]) for i, n in enumerate(OE_NAMES) if moved[i]}
+        clock["per_ms"] = {n: float(slope[i] * 1e-3) for i, n in enumerate(OE_NAMES) if moved[i]}
     with np.errstate(invalid="ignore", divide="ignore"):
         d = np.sqrt(var / np.diag(cov_model))
         cov = cov_model * np.outer(d, d)
@@ -981,4 +1140,5 @@ def identify_output_error(t, q, q_m, u, *, fs_hz: float, measured=None, controll
                              delta_sim=(q_m - q_s)[inner], tau_s=x[_IDX["k"]] * (q_m - q_s)[inner],
                              delta_mocap=lowpass(q_m - (q - x[_IDX["z"]]), fs_hz, fc)[inner],
                              tau_s_motor=tau_s_motor, scores=scores, n_iter=nfev, hysteresis=hysteresis,
-                             spring_r2=spring_r2, motor_noise_rad=sigma_m, split_noise_chi2=split_chi2)
+                             spring_r2=spring_r2, motor_noise_rad=sigma_m, split_noise_chi2=split_chi2,
+                             clock=clock)

@@ -41,7 +41,7 @@ def write_tables(summary: dict, out: Path) -> None:
 
 
 def run_identify(recordings, out: str | Path, method: str = "output_error", cutoff_hz: float | None = None,
-                 decimate: int = 2, validation=None) -> dict:
+                 decimate: int = 2, validation=None, fit_clock_offset: bool = False) -> dict:
     """``mocapfj identify``: identify every joint of one or more recordings; repeats give CV %.
 
     Writes OUT/<k>_<recording>/joints/ (the joints stage of each recording with markers),
@@ -64,7 +64,7 @@ def run_identify(recordings, out: str | Path, method: str = "output_error", cuto
         cals.append(cal)
     ident = identify(recs, method=method, cutoff_hz=cutoff_hz, decimate=decimate,
                      validation=None if validation is None else load_recording(validation),
-                     calibrations=None if any(c is None for c in cals) else cals)
+                     calibrations=None if any(c is None for c in cals) else cals, fit_clock_offset=fit_clock_offset)
     summary = ident.to_dict()
     summary["recordings"] = [str(r) for r in recordings]
     write_json(out / "identify.json", summary)
