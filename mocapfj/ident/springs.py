@@ -26,6 +26,8 @@ integrated exactly piece by piece (:func:`bouc_wen_states`); the test checks it 
 
 from __future__ import annotations
 
+import math
+
 from dataclasses import dataclass, field
 from typing import Callable
 
@@ -202,6 +204,10 @@ def fit_backlash(delta, tau_s, t=None) -> SpringFit:
     return _finish("backlash", {"gap": x[0], "k": x[1], "d0": d0}, el, 3, lambda dd, tt: el.torque(dd - d0), d, y, t)
 
 
+_Z_MAX = 1e12
+"""Largest Bouc-Wen state magnitude bouc_wen_states returns (a diverging trial law is held there)."""
+
+
 def bouc_wen_states(delta, A: float, beta: float, gamma: float, z0: float = 0.0) -> np.ndarray:
     """Bouc-Wen state z (T,) rad (n = 1) along delta (T,) rad, linear between samples, exactly.
 
@@ -220,7 +226,10 @@ def bouc_wen_states(delta, A: float, beta: float, gamma: float, z0: float = 0.0)
                 zn = zc + A * rem
             else:
                 zi = A / lam
-                zn = zi + (zc - zi) * np.exp(min(-lam * rem, 700.0))
+                # a softening law (lam < 0) grows z without bound: held at +-Z_MAX (a residual
+                # the fit rejects) rather than overflowing
+                zn = zi + (zc - zi) * math.exp(min(-lam * rem, 50.0))
+                zn = min(max(zn, -_Z_MAX), _Z_MAX)
             if zc * zn < 0:                          # crossed 0: distance to it, then the other law
                 if abs(lam) < 1e-12:
                     used = -zc / A

