@@ -148,6 +148,11 @@ def _cmd_joints(args) -> int:
             if j["deflection_rms_rad"] is not None:
                 line += f", deflection RMS {j['deflection_rms_rad'] * 1e3:.3f} mrad"
             lines.append(line)
+            for key, rep in (j.get("marker_repairs") or {}).items():
+                parts = [f"{'/'.join(w['labels'])} exchanged in {w['frames']} frames from t = {w['from_s']:.3f} s"
+                         for w in rep["swaps"]]
+                parts += [f"{n} samples of {m} off the cluster removed" for m, n in rep["removed"].items()]
+                lines.append(f"    {key} markers repaired: " + "; ".join(parts))
             if "note" in j:
                 lines.append(f"    {j['note']}")
         lines.append(f"  wrote {args.out} (<joint>.joint.toml, <joint>.angles.csv, joints.json)")

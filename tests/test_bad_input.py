@@ -240,3 +240,104 @@ def test_the_declared_synchronisation_is_not_second_guessed(pa10_20s, tmp_path):
     r = _cli("identify", pa10_20s, "--out", tmp_path / "o", "--json", timeout=600)
     (j,) = json.loads(r.stdout)["joints"]
     assert not j["clock_offset"]["found"] and abs(j["clock_offset"]["offset_s"]) < 1e-3
+
+
+# -- data consistent in form and wrong in fact --------------------------------------------------
+
+def test_millimetres_labelled_as_metres(bundle, tmp_path):
+    import ezc3d
+
+    b = _copy(bundle, tmp_path)
+    c3d = next(b.glob("*.c3d"))
+    c = ezc3d.c3d(str(c3d))
+    c["parameters"]["POINT"]["UNITS"]["value"] = ["m"]
+    c.write(str(c3d))
+    _one_line_error(_cli("inspect", b), f"{c3d.name}: POINT:UNITS: expected units that make joint",
+                    "m across", "millimetre coordinates labelled as metres?")
+
+
+@pytest.mark.parametrize("scale, says", [(180 / 3.141592653589793, "q_m looks like degrees"),
+                                         (2.0, "check gear_ratio")])
+def test_a_motor_angle_in_the_wrong_unit(bundle, tmp_path, scale, says):
+    b = _copy(bundle, tmp_path)
+    csv = next(b.glob("*.csv"))
+    lines = csv.read_text().splitlines()
+    head = lines[0].split(",")
+    j = next(i for i, c in enumerate(head) if c.startswith("qm"))
+    rows = [",".join(repr(float(v) * scale) if k == j else v for k, v in enumerate(ln.split(","))) for ln in lines[1:]]
+    csv.write_text("\n".join([lines[0]] + rows) + "\n")
+    _one_line_error(_cli("joints", b, "--out", tmp_path / "o"), f"{csv.name}: {head[j]} (joint",
+                    "expected a motor angle on the link side", says)
+
+
+def test_swapped_labels_and_a_spike_are_repaired_and_reported(bundle, tmp_path):
+    """Two link markers' trajectories exchanged from t = 1.5 s and a 5-frame 0.5 m spike on a
+    third: relabelled from the cluster's pose (the pose jumps where the labels change) and the
+    spike removed, both counted; the angles are those of the clean recording."""
+    import json
+    from dataclasses import replace
+
+    from mocapfj.io import load_recording, read_c3d, write_c3d
+
+    b = _copy(bundle, tmp_path)
+    spec = load_recording(b).joints[0]
+    c3d = next(b.glob("*.c3d"))
+    m = read_c3d(c3d)
+    i, j, k = (m.index(s) for s in spec.link_markers[:3])
+    x = m.xyz.copy()
+    late = m.t >= 1.5
+    x[late, i], x[late, j] = m.xyz[late, j], m.xyz[late, i]
+    x[200:205, k] += 0.5
+    write_c3d(c3d, replace(m, xyz=x))
+    clean = json.loads(_cli("joints", bundle, "--out", tmp_path / "c", "--json").stdout)["joints"][0]
+    r = _cli("joints", b, "--out", tmp_path / "o", "--json")
+    assert r.returncode == 0, r.stderr
+    got = json.loads(r.stdout)["joints"][0]
+    rep = got["marker_repairs"]["link"]
+    assert rep["swaps"] == [{"labels": [spec.link_markers[0], spec.link_markers[1]], "frames": int(late.sum()),
+                             "from_s": pytest.approx(1.5)}]
+    assert rep["removed"] == {spec.link_markers[2]: 5}
+    assert got["angle_marker_rms_mm"] == pytest.approx(clean["angle_marker_rms_mm"], rel=0.02)
+    assert got["q_range_deg"] == pytest.approx(clean["q_range_deg"], abs=0.05)
+
+
+# -- fuzz: mutated bytes of every input file ----------------------------------------------------
+
+def _fuzz_once(bundle, tmp_path, name, data):
+    import contextlib
+    import io
+    import shutil
+    import warnings
+
+    from mocapfj.cli import main
+
+    d = tmp_path / f"f{data.draw(st_ints(0, 10**9))}"
+    shutil.copytree(bundle, d)
+    f = next(d.glob(name))
+    raw = bytearray(f.read_bytes())
+    for _ in range(data.draw(st_ints(1, 6))):
+        i = data.draw(st_ints(0, len(raw) - 1))
+        raw[i] = data.draw(st_ints(0, 255))
+    if data.draw(st_bools()):
+        raw = raw[:data.draw(st_ints(0, len(raw)))]
+    f.write_bytes(bytes(raw))
+    err = io.StringIO()
+    with contextlib.redirect_stderr(err), contextlib.redirect_stdout(io.StringIO()), warnings.catch_warnings():
+        warnings.simplefilter("error")                  # numpy's warnings are handled where they arise
+        code = main(["inspect", str(d)])
+    shutil.rmtree(d)
+    assert code in (0, 2)
+    assert err.getvalue().count("\n") == (1 if code == 2 else 0), err.getvalue()
+
+
+from hypothesis import given, settings  # noqa: E402
+from hypothesis import strategies as st  # noqa: E402
+
+st_ints, st_bools = st.integers, st.booleans
+
+
+@pytest.mark.parametrize("name", ["recording.toml", "*.csv", "*.c3d"])
+@settings(max_examples=40, deadline=None)
+@given(data=st.data())
+def test_mutated_input_files_give_exit_0_or_one_line_and_2(bundle, tmp_path_factory, name, data):
+    _fuzz_once(bundle, tmp_path_factory.mktemp("fuzz"), name, data)

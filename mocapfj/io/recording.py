@@ -13,6 +13,7 @@ import contextvars
 import copy
 import os
 import shutil
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -239,6 +240,33 @@ def _check_markers(path, markers: MarkerTrajectories, joints) -> None:
             if np.all(np.isnan(markers.xyz[:, markers.index(s), 0])):
                 raise InputError(path, f"marker {s!r} (named by joints[{j.name}])", "a marker seen in at least one frame",
                                  f"missing (NaN) in all {markers.n_frames} frames")
+        _check_cluster_size(path, markers, j.name, list(j.link_markers))
+
+
+CLUSTER_SPAN_M = (5e-3, 10.0)
+"""Plausible span of a joint's link-marker cluster, m: markers are centimetres apart at least and a
+robot link is metres long at most. Outside, the file's units are wrong (millimetre coordinates
+labelled as metres give clusters hundreds of metres across)."""
+
+
+def _check_cluster_size(path, markers: MarkerTrajectories, joint: str, labels: list) -> None:
+    """The median over frames of the largest distance between the joint's link markers, against
+    CLUSTER_SPAN_M."""
+    if len(labels) < 2:
+        return
+    xyz = markers.xyz[:, [markers.index(s) for s in labels]]               # (T, M, 3)
+    d = np.linalg.norm(xyz[:, :, None] - xyz[:, None], axis=-1)           # (T, M, M)
+    with np.errstate(invalid="ignore"), warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)                  # frames with every marker lost
+        span = np.nanmax(np.where(np.isnan(d), -np.inf, d).reshape(d.shape[0], -1), axis=1)
+        span = float(np.nanmedian(span[np.isfinite(span) & (span > 0)])) if np.isfinite(span).any() else float("nan")
+    lo, hi = CLUSTER_SPAN_M
+    if not np.isfinite(span) or lo <= span <= hi:
+        return
+    field = "POINT:UNITS" if str(path).lower().endswith(".c3d") else "Units"
+    cause = ("millimetre coordinates labelled as metres?" if span > hi else "metre coordinates labelled as millimetres?")
+    raise InputError(path, field, f"units that make joint {joint}'s link-marker cluster {lo * 1e3:g} mm to {hi:g} m across",
+                     f"{span:.4g} m across ({', '.join(labels)})", hint=cause)
 
 
 def _check_spans(path, markers, controller, offset, tol) -> None:

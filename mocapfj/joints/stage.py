@@ -12,6 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import InputError
+from .repair import repair_cluster
 from ..types import Deflection, JointAngles, JointGeometry, Recording
 from .calibrate import CALIBRATION_METHODS, ParentFrame, calibrate_joint, flip_axis, markers_in_parent_frame, solve_angles
 from .sync import deflection
@@ -46,6 +47,8 @@ class JointResult:
     parent_labels : tuple of str, or "world"
     method : str
         The calibration method asked for ("auto" picks per joint; `geometry.method` says which).
+    repairs : {"link": ClusterRepair dict, "parent": ...} of the clusters whose markers were
+        relabelled or had samples removed (:func:`.repair.repair_cluster`), or None.
     """
 
     name: str
@@ -55,6 +58,7 @@ class JointResult:
     parent: ParentFrame
     parent_labels: tuple[str, ...] | str
     method: str
+    repairs: dict | None = None
 
     @property
     def axis_world(self) -> np.ndarray | None:
@@ -96,6 +100,8 @@ class JointResult:
             "q_m_quantum_rad": None if d is None else d.q_m_quantum_rad,
             "parent_static": self.parent.static,
         }
+        if self.repairs:
+            out["marker_repairs"] = self.repairs
         if d is None:
             out["note"] = NO_CONTROLLER_NOTE
         return out
@@ -120,6 +126,40 @@ class JointsResult:
         return {"recording": self.recording, "method": self.method, "joints": [j.to_dict() for j in self.joints]}
 
 
+MOTOR_SCALE_RANGE = (0.8, 1.25)
+"""Accepted slope of the motor angle (link side) against the mocap's link angle: the two differ by
+the deflection only, a fraction of a percent of the motion in a geared joint."""
+
+
+def _check_motor_scale(rec: Recording, spec, q: np.ndarray, q_m: np.ndarray) -> None:
+    """The motor angle moves as the link does (q_m = q + deflection): its slope against the mocap
+    angle is 1. Degrees for radians, the motor side for the link side (a missing gear ratio), or a
+    wrong gear ratio show as a slope far from 1 and are refused, naming the likely cause."""
+    ok = np.isfinite(q) & np.isfinite(q_m)
+    if ok.sum() < 10:
+        return
+    qq, mm = q[ok] - q[ok].mean(), q_m[ok] - q_m[ok].mean()
+    if np.ptp(qq) < np.radians(5.0) or not float(qq @ qq) > 0:
+        return                                   # too little motion to judge the scale
+    slope = float(qq @ mm) / float(qq @ qq)
+    lo, hi = MOTOR_SCALE_RANGE
+    if lo <= abs(slope) <= hi:
+        return
+    n = spec.gear_ratio
+    if abs(slope / np.degrees(1.0) - 1) < 0.1:
+        cause = "q_m looks like degrees: the controller log's angles must be in radians"
+    elif n != 1 and abs(slope / n - 1) < 0.1:
+        cause = f"q_m looks like the motor side: it must be divided by gear_ratio ({n:g}) (docs/conventions.md)"
+    elif n != 1 and abs(slope * n - 1) < 0.1:
+        cause = f"q_m looks divided by the gear ratio twice (gear_ratio {n:g})"
+    else:
+        cause = f"check gear_ratio ({n:g}) and the units of the motor angle column"
+    where = (rec.root / rec.controller_file) if rec.root is not None and rec.controller_file else rec.root
+    raise InputError(where, f"{spec.motor_position} (joint {spec.name})",
+                     "a motor angle on the link side that moves with the mocap's link angle (slope 1)",
+                     f"a slope of {slope:.4g} over {np.degrees(np.ptp(qq)):.0f} deg of motion", hint=cause)
+
+
 def calibrate_joints(rec: Recording, method: str = "auto") -> JointsResult:
     """Joint geometry, link angles and (with a controller log) deflections of every joint of `rec`.
 
@@ -140,6 +180,19 @@ def calibrate_joints(rec: Recording, method: str = "auto") -> JointsResult:
             continue
         v = rec.markers.select(spec.link_markers)
         v_parent = None if spec.parent_is_world else rec.markers.select(spec.parent_markers)
+        repairs = {}
+        source = (rec.root / rec.marker_file) if rec.root is not None and rec.marker_file else rec.root
+        for key, labels in (("link", spec.link_markers), ("parent", None if v_parent is None else spec.parent_markers)):
+            if labels is None:
+                continue
+            fixed, rep = repair_cluster(v if key == "link" else v_parent, labels, rec.markers.t, source=source,
+                                        where=f" (joints[{spec.name}] {key} cluster)")
+            if rep.changed:
+                repairs[key] = rep.to_dict()
+                if key == "link":
+                    v = fixed
+                else:
+                    v_parent = fixed
         v, parent = markers_in_parent_frame(v, v_parent)
         try:
             geometry, angles = calibrate_joint(v, spec.link_markers, rec.markers.t, method)
@@ -154,8 +207,9 @@ def calibrate_joints(rec: Recording, method: str = "auto") -> JointsResult:
                 geometry = flip_axis(geometry)
                 angles = solve_angles(v, geometry, rec.markers.t)
                 d = deflection(angles, ctl, spec.name, rec.clock_offset_s)
+            _check_motor_scale(rec, spec, angles.q, d.q_m)
         joints.append(JointResult(name=spec.name, geometry=geometry, angles=angles, deflection=d, parent=parent,
-                                  parent_labels=spec.parent_markers, method=method))
+                                  parent_labels=spec.parent_markers, method=method, repairs=repairs or None))
     if not joints:
         raise InputError(rec.root, "joints", "at least one joint with link_markers", "none")
     return JointsResult(recording=rec.name, method=method, joints=tuple(joints))
