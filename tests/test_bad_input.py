@@ -341,3 +341,16 @@ st_ints, st_bools = st.integers, st.booleans
 @given(data=st.data())
 def test_mutated_input_files_give_exit_0_or_one_line_and_2(bundle, tmp_path_factory, name, data):
     _fuzz_once(bundle, tmp_path_factory.mktemp("fuzz"), name, data)
+
+
+def test_negative_friction_is_a_finding_not_a_result(pa10_20s, tmp_path):
+    """Motor-first on the 10 ms offset: v = -99 and b = 144 came out as a normal result; a negative
+    friction is reported not determined with its likely causes, and its split partner with it."""
+    import json
+
+    b = _shift_controller(pa10_20s, tmp_path / "b", 0.010)
+    r = _cli("identify", b, "--out", tmp_path / "o", "--json", "--method", "motor_first", timeout=600)
+    assert r.returncode == 0, r.stderr
+    p = json.loads(r.stdout)["joints"][0]["params"]
+    assert p["v"]["value"] < 0 and not p["v"]["determined"] and "clock offset" in p["v"]["reason"]
+    assert not p["b"]["determined"] and "partner v came out negative" in p["b"]["reason"]

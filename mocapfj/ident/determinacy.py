@@ -136,3 +136,33 @@ def judge_parameters(names, values, std, cov, *, duration_s: float, context: dic
             reason = suspect[n]
         out[n] = Parameter(n, v, s, determined=reason is None, reason=reason)
     return out
+
+
+_NON_NEGATIVE = {"I": "link inertia", "J": "motor inertia", "k": "stiffness", "c": "Coulomb friction",
+                 "v": "link viscous friction", "b": "motor viscous friction"}
+_PARTNER = {"I": "J", "J": "I", "v": "b", "b": "v"}
+NONPHYSICAL_CAUSES = ("an undeclared clock offset between mocap and controller (the link then seems to lead or lag "
+                      "the motor; output error, the default method, fits and reports it), a sign or scale error in "
+                      "q_m, q or u (docs/conventions.md), or a friction law the model lacks")
+
+
+def flag_nonphysical(values: dict) -> dict:
+    """Parameters (name -> Parameter) with every negative inertia, stiffness or friction reported
+    not determined, as a finding with its likely causes, and its split partner (I / J, v / b) with
+    it; the others unchanged."""
+    from dataclasses import replace
+
+    neg = [n for n, what in _NON_NEGATIVE.items() if n in values and values[n].value < 0]
+    if not neg:
+        return values
+    out = dict(values)
+    for n in neg:
+        out[n] = replace(values[n], determined=False,
+                         reason=f"{n} = {values[n].value:.4g} is negative, which no joint's {_NON_NEGATIVE[n]} is: "
+                                f"not a result but a finding; likely causes: {NONPHYSICAL_CAUSES}")
+        m = _PARTNER.get(n)
+        if m in values and m not in neg:
+            out[m] = replace(values[m], determined=False,
+                             reason=f"its partner {n} came out negative ({values[n].value:.4g}), so their split is not "
+                                    f"physical; likely causes: {NONPHYSICAL_CAUSES}")
+    return out
