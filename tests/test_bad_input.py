@@ -354,3 +354,28 @@ def test_negative_friction_is_a_finding_not_a_result(pa10_20s, tmp_path):
     p = json.loads(r.stdout)["joints"][0]["params"]
     assert p["v"]["value"] < 0 and not p["v"]["determined"] and "clock offset" in p["v"]["reason"]
     assert not p["b"]["determined"] and "partner v came out negative" in p["b"]["reason"]
+
+
+def test_metres_labelled_as_millimetres(bundle, tmp_path):
+    import ezc3d
+
+    b = _copy(bundle, tmp_path)
+    c3d = next(b.glob("*.c3d"))
+    c = ezc3d.c3d(str(c3d))
+    c["data"]["points"][:3] /= 1000.0                   # the coordinates in metres, the label still mm
+    c.write(str(c3d))
+    _one_line_error(_cli("inspect", b), "POINT:UNITS: expected units that make joint",
+                    "metre coordinates labelled as millimetres?")
+
+
+@pytest.mark.parametrize("old, new, says", [
+    ("gear_ratio = ", "gear_ratio = inf #", "gear_ratio: expected a positive, finite gear ratio, got inf"),
+    ("clock_offset_s = ", "clock_offset_s = nan #", "markers.clock_offset_s: expected a finite offset in seconds, got nan"),
+    ("[controller]", "[sync]\nduration_tolerance_s = nan\n\n[controller]",
+     "sync.duration_tolerance_s: expected a non-negative, finite tolerance in seconds, got nan")])
+def test_non_finite_numbers_in_recording_toml_name_the_key(bundle, tmp_path, old, new, says):
+    b = _copy(bundle, tmp_path)
+    t = (b / "recording.toml").read_text()
+    assert old in t
+    (b / "recording.toml").write_text(t.replace(old, new, 1))
+    _one_line_error(_cli("inspect", b), f"recording.toml: {says}" if "sync" in says or "markers" in says else says)
