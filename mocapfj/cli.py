@@ -248,6 +248,11 @@ def _planned(name: str) -> Callable:
     return run
 
 
+def _allow_outside_bundle(parser) -> None:
+    parser.add_argument("--allow-outside-bundle", action="store_true",
+                        help="read files that recording.toml names outside its bundle (../, absolute paths, symlinks)")
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(
         prog="mocapfj",
@@ -280,8 +285,7 @@ def build_parser() -> argparse.ArgumentParser:
     jn.add_argument("--method", default="auto", choices=["auto", "ml", "halvorsen", "gamage_lasenby", "sara"],
                     help="axis fit (default auto: maximum likelihood, or SARA where the markers do not move as a hinge)")
     jn.add_argument("--json", action="store_true", help="print a JSON summary on stdout")
-    jn.add_argument("--allow-outside-bundle", action="store_true",
-                    help="read files that recording.toml names outside its bundle (../, absolute paths, symlinks)")
+    _allow_outside_bundle(jn)
     jn.set_defaults(func=_cmd_joints)
 
     idf = sub.add_parser("identify", help="identification of joint dynamics and spring model")
@@ -300,8 +304,7 @@ def build_parser() -> argparse.ArgumentParser:
                      help="output_error: identify an offset between the mocap and controller clocks with the "
                           "dynamics and apply it (by default it is tested and reported, and what it moves is flagged)")
     idf.add_argument("--json", action="store_true", help="print a JSON summary on stdout")
-    idf.add_argument("--allow-outside-bundle", action="store_true",
-                    help="read files that recording.toml names outside its bundle (../, absolute paths, symlinks)")
+    _allow_outside_bundle(idf)
     idf.set_defaults(func=_cmd_identify)
 
     dc = sub.add_parser("discover", help="locate, name and model what the model misses in a recording")
@@ -311,15 +314,13 @@ def build_parser() -> argparse.ArgumentParser:
                     help="model file (or scenario file) to compare with; default: identified on the spot")
     dc.add_argument("--validation", default=None, help="a second recording on which to prove the fit improves")
     dc.add_argument("--json", action="store_true", help="print a JSON summary on stdout")
-    dc.add_argument("--allow-outside-bundle", action="store_true",
-                    help="read files that recording.toml names outside its bundle (../, absolute paths, symlinks)")
+    _allow_outside_bundle(dc)
     dc.set_defaults(func=_cmd_discover)
 
     i = sub.add_parser("inspect", help="check and summarise a recording bundle or a C3D/TRC file")
     i.add_argument("recording", help="bundle directory, recording.toml, or marker file")
     i.add_argument("--json", action="store_true", help="print a JSON summary on stdout")
-    i.add_argument("--allow-outside-bundle", action="store_true",
-                    help="read files that recording.toml names outside its bundle (../, absolute paths, symlinks)")
+    _allow_outside_bundle(i)
     i.set_defaults(func=_cmd_inspect)
 
     for name, help_text in PLANNED:
