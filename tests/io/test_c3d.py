@@ -266,6 +266,9 @@ def test_mutated_bytes_give_markers_or_one_error(tmp_path_factory, data):
         raw = raw[:data.draw(st.integers(0, len(raw)))]
     q = d / "m.c3d"
     q.write_bytes(bytes(raw))
+    import tracemalloc
+
+    tracemalloc.start()
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("error")              # numpy's warnings handled where they arise
@@ -274,6 +277,10 @@ def test_mutated_bytes_give_markers_or_one_error(tmp_path_factory, data):
         assert "\n" not in str(e) and str(e).startswith(str(q))
     else:
         assert isinstance(got, MarkerTrajectories)
+    finally:
+        _, peak = tracemalloc.get_traced_memory()
+        tracemalloc.stop()
+    assert peak < 40 * len(raw) + 2_000_000, peak     # bounded by the file's size (a cut file took 12 GB)
 
 
 def test_ten_minutes_at_250_hz_round_trip(tmp_path):
