@@ -705,24 +705,29 @@ def _hysteresis_test(prob: _Problem, x, threshold: float = HYSTERESIS_CHI2) -> d
     return best
 
 
-def _clock_scan(prob: _Problem, x, step_s: float = 5e-4) -> float:
+def _clock_scan(prob: _Problem, x, coarse_s: float = 4e-3, fine_s: float = 2.5e-4) -> float:
     """The offset dt (|dt| <= CLOCK_MAX_S) that best aligns the simulated link at x with the mocap
-    angle (least squares over the measured samples, the zero refitted), on a grid of `step_s`
-    refined by a parabola: one simulation, the comparison shifted."""
+    angle (least squares over the measured samples, the zero refitted): one simulation, the
+    comparison shifted over a grid of `coarse_s`, then of `fine_s` around the best, refined by a
+    parabola (the misfit varies over the motion's fastest period, a few tenths of a second)."""
     d = prob.d
     q_s, w_s = prob.simulate(np.asarray(x, dtype=np.float64))
     keep = ~d.filled
-    grid = np.arange(-CLOCK_MAX_S, CLOCK_MAX_S + step_s / 2, step_s)
-    ssr = np.empty(grid.size)
-    for i, dt in enumerate(grid):                # ~800 shifts of one simulated series (interpolations)
+
+    def ssr(dt):
         r = (d.q - d.q_band(d.at_mocap(q_s, w_s, float(dt))))[keep]
-        ssr[i] = float(np.sum((r - r.mean()) ** 2))
-    k = int(np.argmin(ssr))
+        return float(np.sum((r - r.mean()) ** 2))
+
+    grid = np.arange(-CLOCK_MAX_S, CLOCK_MAX_S + coarse_s / 2, coarse_s)
+    best = grid[int(np.argmin([ssr(dt) for dt in grid]))]
+    grid = best + np.arange(-coarse_s, coarse_s + fine_s / 2, fine_s)
+    cost = np.array([ssr(dt) for dt in grid])
+    k = int(np.argmin(cost))
     if 0 < k < grid.size - 1:
-        a, b, c = ssr[k - 1], ssr[k], ssr[k + 1]
+        a, b, c = cost[k - 1], cost[k], cost[k + 1]
         den = a - 2 * b + c
         if den > 0:
-            return float(grid[k] + 0.5 * step_s * (a - c) / den)
+            return float(grid[k] + 0.5 * fine_s * (a - c) / den)
     return float(grid[k])
 
 
