@@ -19,6 +19,8 @@ from __future__ import annotations
 import os
 from collections.abc import Sequence
 
+import numpy as np
+
 from .errors import InputError
 from .types import JointSignals, Recording
 
@@ -106,6 +108,27 @@ def _identify_recording(rec: Recording, method: str, cutoff_hz, decimate: int, c
     return out, None
 
 
+def _same_data(a: Recording, b: Recording) -> bool:
+    """The same marker trajectories and controller log (a repeat given twice, or a copy)."""
+    def eq(x, y):
+        return x is None and y is None or (x is not None and y is not None and x.shape == y.shape
+                                           and np.array_equal(x, y, equal_nan=True))
+    ma, mb = a.markers, b.markers
+    ca, cb = a.controller, b.controller
+    return (eq(None if ma is None else ma.xyz, None if mb is None else mb.xyz)
+            and eq(None if ca is None else ca.tau, None if cb is None else cb.tau)
+            and eq(None if ca is None else ca.q_m, None if cb is None else cb.q_m))
+
+
+def _check_distinct(recs: list, names) -> None:
+    """Repeats give the CV %: the same recording twice would report a spread of zero."""
+    for i in range(len(recs)):
+        for j in range(i):
+            if _same_data(recs[i], recs[j]):
+                raise InputError(None, "recordings", "distinct recordings (repeats of a trial give the mean and CV %)",
+                                 f"{names[j]} and {names[i]} hold the same data")
+
+
 def identify(recordings: RecordingLike | Sequence[RecordingLike], *, method: str = "output_error",
              cutoff_hz: float | None = None, decimate: int = 2, validation: RecordingLike | None = None,
              calibrations: Sequence | None = None, fit_clock_offset: bool = False):
@@ -142,6 +165,7 @@ def identify(recordings: RecordingLike | Sequence[RecordingLike], *, method: str
     if validation is not None:
         raise InputError(None, "validation", "a validation recording only for a rigid robot (no markers)",
                          "a recording with markers", hint="use 'discover --validation' for a flexible joint")
+    _check_distinct(recs, names)
     trials, nlink = [], []
     for i, rec in enumerate(recs):
         cal = calibrations[i] if calibrations is not None else None

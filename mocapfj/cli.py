@@ -65,6 +65,8 @@ def _human_recording(s: dict) -> str:
     if c is not None:
         lines.append(f"  controller {c['file']}: {c['n_samples']} samples at {c['rate_hz']:.6g} Hz, "
                      f"{c['t_start_s']:.3f}..{c['t_end_s']:.3f} s (clock offset {s['clock_offset_s']} s)")
+        if c.get("time_note"):
+            lines.append(f"             {c['time_note']}")
     elif "controller" in s:
         lines.append("  controller none (markers only: axes and angles, no deflection)")
     for j in s["joints"]:

@@ -111,6 +111,9 @@ class ControllerLog:
     joint_names : tuple of J str
     extra : mapping of str to (T,) float
         Any other logged columns, kept so that a bundle writes back losslessly.
+    time_note : str or None
+        What the reader did to the time stamps (a jittered stamping of a uniform log replaced by
+        its uniform tick), or None.
     """
 
     t: np.ndarray
@@ -118,6 +121,7 @@ class ControllerLog:
     tau: np.ndarray
     joint_names: tuple[str, ...]
     extra: Mapping[str, np.ndarray] = field(default_factory=dict)
+    time_note: str | None = None
 
     def __post_init__(self) -> None:
         names = tuple(str(s) for s in self.joint_names)

@@ -7,6 +7,7 @@ from __future__ import annotations
 import subprocess
 import sys
 
+import numpy as np
 import pytest
 
 from mocapfj.io import write_recording
@@ -370,7 +371,9 @@ def test_metres_labelled_as_millimetres(bundle, tmp_path):
 
 @pytest.mark.parametrize("old, new, says", [
     ("gear_ratio = ", "gear_ratio = inf #", "gear_ratio: expected a positive, finite gear ratio, got inf"),
-    ("clock_offset_s = ", "clock_offset_s = nan #", "markers.clock_offset_s: expected a finite offset in seconds, got nan"),
+    ("clock_offset_s = ", "clock_offset_s = nan #", "markers.clock_offset_s: expected a finite offset in seconds, at most a "
+                                                    "day, got nan"),
+    ("clock_offset_s = ", "clock_offset_s = 1e308 #", "at most a day, got 1e+308"),
     ("[controller]", "[sync]\nduration_tolerance_s = nan\n\n[controller]",
      "sync.duration_tolerance_s: expected a non-negative, finite tolerance in seconds, got nan")])
 def test_non_finite_numbers_in_recording_toml_name_the_key(bundle, tmp_path, old, new, says):
@@ -379,3 +382,87 @@ def test_non_finite_numbers_in_recording_toml_name_the_key(bundle, tmp_path, old
     assert old in t
     (b / "recording.toml").write_text(t.replace(old, new, 1))
     _one_line_error(_cli("inspect", b), f"recording.toml: {says}" if "sync" in says or "markers" in says else says)
+
+
+
+# -- found by an adversarial sweep (247 corrupted bundles) ---------------------------------------
+
+def _edit_toml(b, old, new):
+    t = (b / "recording.toml").read_text()
+    assert old in t
+    (b / "recording.toml").write_text(t.replace(old, new, 1))
+
+
+@pytest.mark.parametrize("name", ["../../evil", "", "j2\\u0000x", "j" * 300])
+def test_a_joint_name_that_would_make_a_path(bundle, tmp_path, name):
+    b = _copy(bundle, tmp_path)
+    t = (b / "recording.toml").read_text()
+    import re
+
+    (b / "recording.toml").write_text(re.sub(r'name = "j1"', lambda m: f'name = "{name}"', t, count=1))
+    _one_line_error(_cli("joints", b, "--out", tmp_path / "o"), "joints[0].name: expected a joint name of 1-64")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["b"]          # nothing written anywhere
+
+
+def test_odd_files_and_values(bundle, tmp_path):
+    b = _copy(bundle, tmp_path)
+    c3d = next(b.glob("*.c3d"))
+    c3d.unlink()
+    c3d.symlink_to(c3d.name)                                               # a symlink to itself
+    _one_line_error(_cli("inspect", b), "markers.file: expected a file inside the bundle", "a symlink that leads to itself")
+    b = _copy(bundle, tmp_path / "2")
+    _edit_toml(b, 'format = "mocapfj.recording/1"', 'format = "mocapfj.recording/' + "9" * 5000 + '"')
+    r = _cli("inspect", b)
+    _one_line_error(r, "format: expected format")
+    assert len(r.stderr) < 300
+    (tmp_path / "afile").write_text("")
+    _one_line_error(_cli("joints", bundle, "--out", tmp_path / "afile" / "sub"), "--out: path: expected a directory whose "
+                                                                                 "parents are directories")
+
+
+def test_the_same_recording_twice_is_not_two_trials(bundle, tmp_path):
+    import shutil
+
+    shutil.copytree(bundle, tmp_path / "copy")
+    _one_line_error(_cli("identify", bundle, tmp_path / "copy", "--out", tmp_path / "o", "--method", "two_step"),
+                    "expected distinct recordings", "hold the same data")
+
+
+def _edit_times(b, fn):
+    csv = next(b.glob("*.csv"))
+    lines = csv.read_text().splitlines()
+    i = lines[0].split(",").index("time")
+    rows = [ln.split(",") for ln in lines[1:]]
+    rows = fn(i, rows)
+    csv.write_text("\n".join([lines[0]] + [",".join(r) for r in rows]) + "\n")
+    return csv
+
+
+def test_a_controller_log_with_a_gap_or_at_2_hz(bundle, tmp_path):
+    b = _copy(bundle, tmp_path)
+    csv = _edit_times(b, lambda i, rows: rows[:1000] + rows[1050:])
+    _one_line_error(_cli("inspect", b), f"{csv.name}: column 'time': expected a log without gaps", "rows missing between")
+    b = _copy(bundle, tmp_path / "2")
+    csv = _edit_times(b, lambda i, rows: rows[::500] + ([rows[-1]] if (len(rows) - 1) % 500 else []))
+    _one_line_error(_cli("inspect", b), f"{csv.name}: column 'time': expected a controller log at half the mocap rate")
+
+
+def test_jittered_stamps_of_a_uniform_log_are_put_back_on_its_tick(bundle, tmp_path):
+    """Stamps scattered by +-0.3 ms around a 1 ms tick (the values sampled on the tick): read on
+    the tick, which the summary says; the joints' deflection is that of the clean log."""
+    import json
+
+    rng = np.random.default_rng(0)
+
+    def jitter(i, rows):
+        for r in rows[1:-1]:
+            r[i] = repr(float(r[i]) + rng.uniform(-3e-4, 3e-4))
+        return rows
+
+    b = _copy(bundle, tmp_path)
+    _edit_times(b, jitter)
+    r = _cli("inspect", b, "--json")
+    assert r.returncode == 0 and "uniform 1 ms tick" in json.loads(r.stdout)["controller"]["time_note"]
+    clean = json.loads(_cli("joints", bundle, "--out", tmp_path / "c", "--json").stdout)["joints"][0]
+    got = json.loads(_cli("joints", b, "--out", tmp_path / "o", "--json").stdout)["joints"][0]
+    assert got["deflection_rms_rad"] == pytest.approx(clean["deflection_rms_rad"], rel=1e-3)

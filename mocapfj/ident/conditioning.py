@@ -139,10 +139,17 @@ def controller_on(t_to: np.ndarray, t_ctrl: np.ndarray, x: np.ndarray, fs_ctrl_h
     controller rate, then linear interpolation; NaN outside the log's span.
     """
     t_to = np.asarray(t_to, dtype=np.float64)
+    t_ctrl = np.asarray(t_ctrl, dtype=np.float64)
+    x = np.asarray(x, dtype=np.float64)
     fs_to = 1.0 / float(np.median(np.diff(t_to)))
+    step = float(np.median(np.diff(t_ctrl)))
+    if np.max(np.abs(np.diff(t_ctrl) - step)) > 1e-3 * step:
+        # a jittered log: onto its median step first (the filter assumes uniform samples)
+        grid = t_ctrl[0] + step * np.arange(int(np.floor((t_ctrl[-1] - t_ctrl[0]) / step + 1e-9)) + 1)
+        x, t_ctrl = np.interp(grid, t_ctrl, x), grid
     fc = 0.4 * min(fs_to, fs_ctrl_hz) if cutoff_hz is None else cutoff_hz
-    xf = lowpass(np.asarray(x, dtype=np.float64), fs_ctrl_hz, fc) if fc < 0.5 * fs_ctrl_hz else x
-    return resample_to(np.asarray(t_ctrl, dtype=np.float64), xf, t_to)
+    xf = lowpass(x, fs_ctrl_hz, fc) if fc < 0.5 * fs_ctrl_hz else x
+    return resample_to(t_ctrl, xf, t_to)
 
 
 def check_signals(t, q, q_m, u, fs_hz: float):
@@ -233,6 +240,9 @@ def joint_signals(d: Deflection, controller: ControllerLog, joint: str, *, min_v
     g = np.isfinite(q_m) & np.isfinite(u)
     fs = 1.0 / float(np.median(np.diff(t)))
     ctrl = controller_span(controller, j, t[g][0], t[g][-1])
+    # a jittered log's uniform grid can end a fraction of a step inside the mocap span: only the
+    # mocap samples the grid covers are kept
+    g &= (t >= ctrl["t_c"][0] - 1e-9) & (t <= ctrl["t_c"][-1] + 1e-9)
     return JointSignals(t=t[g], q=q[g], q_m=q_m[g], u=u[g], fs_hz=fs, n_filled=int((~ok[g]).sum()), name=joint,
                         filled=~ok[g], **ctrl)
 

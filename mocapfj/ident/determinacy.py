@@ -166,3 +166,23 @@ def flag_nonphysical(values: dict) -> dict:
                              reason=f"its partner {n} came out negative ({values[n].value:.4g}), so their split is not "
                                     f"physical; likely causes: {NONPHYSICAL_CAUSES}")
     return out
+
+
+def flag_imprecise(values: dict) -> dict:
+    """Parameters (name -> Parameter) with every one still reported determined whose relative SD
+    is above UNDETERMINED_REL_STD_PCT (mglx, mgly: of the gravity magnitude) reported not
+    determined: the rule of :func:`judge_parameters`, for the estimators that do not apply it."""
+    from dataclasses import replace
+
+    g = math.hypot(values["mglx"].value, values["mgly"].value) if "mglx" in values and "mgly" in values else 0.0
+    out = dict(values)
+    for n, p in values.items():
+        if not p.determined:
+            continue
+        ref = g if n in ("mglx", "mgly") else abs(p.value)
+        rel = 100 * p.std / ref if ref > 0 and math.isfinite(p.std) else math.inf
+        if rel > UNDETERMINED_REL_STD_PCT:
+            out[n] = replace(p, determined=False,
+                             reason=f"relative SD {rel:.3g} % above {UNDETERMINED_REL_STD_PCT:g} %: the recording does not "
+                                    "determine it with this method")
+    return out

@@ -23,7 +23,7 @@ from ..dynamics import CoulombViscous, CubicSpring, JointModel, LinearSpring
 from ..errors import InputError
 from ..types import JointSignals
 from .conditioning import derivatives, lowpass, white_noise_sd
-from .determinacy import flag_nonphysical
+from .determinacy import flag_imprecise, flag_nonphysical
 from .result import PARAMETER_NAMES, IdentifiedJoint, Parameter, SpringResult
 from .springs import HYSTERETIC, SPRING_FITTERS, bouc_wen_states, select_spring_model
 
@@ -258,7 +258,7 @@ def identify_joint(t, q, q_m, u, *, fs_hz: float, method: str = "output_error", 
         mf, spring = _motor_first_spring(t, q, q_m, u, fs_hz, decimate, models)
         values, stages, torque_rms, q_zero = _motor_first_values(mf)
         cond.update(cond_motor=mf.motor.cond, cond_link=mf.link.cond)
-    values = flag_nonphysical(values)
+    values = flag_imprecise(flag_nonphysical(values))
     p = {n: v.value for n, v in values.items()}
     return IdentifiedJoint(name=name, method=method, params=values, model=_model(name, gear_ratio, p, spring, smoothing),
                            spring=spring, stages=stages, cond=cond, torque_rms=float(torque_rms),

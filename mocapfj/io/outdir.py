@@ -33,6 +33,9 @@ def check_output_dir(out, inputs: Sequence, option: str = "--out") -> Path:
     """Refuse an output directory that is, contains or lies inside an input, or that holds files
     mocapfj did not write; return it resolved."""
     out_r = Path(out).resolve()
+    for parent in out_r.parents:
+        if parent.exists() and not parent.is_dir():
+            raise InputError(option, "path", "a directory whose parents are directories", f"{parent} is a file")
     for inp in inputs:
         if inp is None:
             continue

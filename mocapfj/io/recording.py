@@ -12,6 +12,7 @@ import contextvars
 
 import copy
 import os
+import re
 import shutil
 import warnings
 from pathlib import Path
@@ -25,7 +26,7 @@ from .c3d import read_c3d, write_c3d
 from .calib import read_rig, write_rig
 from .csvio import check_increasing, read_csv_columns, write_csv_columns
 from .results import read_detections, write_detections
-from .tomlio import check_format, read_toml, require, write_toml
+from .tomlio import check_format, describe, read_toml, require, write_toml
 from .trc import read_trc, write_trc
 
 __all__ = [
@@ -71,6 +72,21 @@ def write_markers(path: str | os.PathLike[str], markers: MarkerTrajectories) -> 
         raise InputError(path, "markers.file", "a .c3d or .trc file", repr(path.name))
 
 
+MAX_STEP_RATIO = 10.0
+"""A controller time step this many times its median is a gap (rows lost), not jitter."""
+MAX_CONTROLLER_VALUE = 1e9
+"""Largest magnitude accepted in a controller column the joints use (rad, N m, s): beyond, the log
+is corrupt (1e300 overflowed the statistics downstream) or its unit is wrong."""
+
+
+def _is_number(text: str) -> bool:
+    try:
+        float(text)
+    except ValueError:
+        return False
+    return True
+
+
 def read_controller(path, time_column: str, joints: tuple[JointSpec, ...]) -> ControllerLog:
     """Read a controller CSV into a ControllerLog, checking every column the joints name."""
     cols = read_csv_columns(path)
@@ -78,18 +94,65 @@ def read_controller(path, time_column: str, joints: tuple[JointSpec, ...]) -> Co
     for j in joints:
         wanted += [(f"joints[{j.name}].motor_position", j.motor_position),
                    (f"joints[{j.name}].motor_torque", j.motor_torque)]
+    names = list(cols)
+    if names and all(_is_number(c) for c in names):
+        raise InputError(path, "header", "a first row of column names", "a row of numbers",
+                         hint="add the header row the recording.toml names")
     for field, col in wanted:
         if col not in cols:
-            raise InputError(path, f"column {col!r} (named by {field})", f"one of the CSV columns {list(cols)}",
+            shown = ", ".join(repr(c[:40]) for c in names[:12]) + (f", ... ({len(names)} columns)" if len(names) > 12 else "")
+            raise InputError(path, f"column {col[:40]!r} (named by {field})", f"one of the CSV columns [{shown}]",
                              "no such column")
     t = cols[time_column]
     check_increasing(path, f"column {time_column!r}", t)
+    if t.size > 2:
+        steps = np.diff(t)
+        med = float(np.median(steps))
+        if steps.max() > MAX_STEP_RATIO * med:
+            i = int(np.argmax(steps))
+            raise InputError(path, f"column {time_column!r}", f"a log without gaps (steps below {MAX_STEP_RATIO:g} x its "
+                             f"median {1e3 * med:.3g} ms)", f"rows missing between t = {t[i]:.4f} and {t[i + 1]:.4f} s "
+                             f"(rows {i + 2}-{i + 3})", hint="cut the trial where the log is complete")
+    for _, col in wanted:
+        x = cols[col]
+        with np.errstate(invalid="ignore"):
+            wild = np.abs(x) > MAX_CONTROLLER_VALUE
+        if wild.any():
+            i = int(np.argmax(wild))
+            raise InputError(path, f"column {col!r}", f"values below {MAX_CONTROLLER_VALUE:g} in magnitude (SI: rad, "
+                             "N m, s)", f"{x[i]:.3g} at row {i + 2} ({int(wild.sum())} such values)",
+                             hint="a corrupt log or a wrong unit")
     used = {time_column} | {j.motor_position for j in joints} | {j.motor_torque for j in joints}
     n = t.shape[0]
     q_m = np.column_stack([cols[j.motor_position] for j in joints]) if joints else np.empty((n, 0))
     tau = np.column_stack([cols[j.motor_torque] for j in joints]) if joints else np.empty((n, 0))
     extra = {k: v for k, v in cols.items() if k not in used}
-    return ControllerLog(t=t, q_m=q_m, tau=tau, joint_names=tuple(j.name for j in joints), extra=extra)
+    t, note = _uniform_tick(t, q_m)
+    return ControllerLog(t=t, q_m=q_m, tau=tau, joint_names=tuple(j.name for j in joints), extra=extra,
+                         time_note=note)
+
+
+def _uniform_tick(t: np.ndarray, q_m: np.ndarray) -> tuple[np.ndarray, str | None]:
+    """A controller samples on its tick; its logged stamps may scatter around it (the logging
+    thread's clock). When the stamps deviate from their straight-line fit by less than half a step
+    and the motor angle is smoother on that uniform tick than on the stamps (its third differences
+    smaller: the values were sampled uniformly, the stamps are noisy), the tick replaces them
+    (and the note says so); otherwise the stamps stand (the values were taken when stamped)."""
+    if t.size < 8 or q_m.size == 0:
+        return t, None
+    k = np.arange(t.size, dtype=np.float64)
+    slope, icpt = np.polyfit(k, t, 1)
+    tick = icpt + slope * k
+    dev = np.abs(t - tick)
+    if not (0 < slope and dev.max() > 1e-3 * slope and dev.max() < 0.5 * slope):
+        return t, None
+    on_stamps = np.column_stack([np.interp(tick, t, q_m[:, j]) for j in range(q_m.shape[1])])
+    rough_tick = float(np.sum(np.diff(q_m, 3, axis=0) ** 2))
+    rough_stamps = float(np.sum(np.diff(on_stamps, 3, axis=0) ** 2))
+    if rough_tick < 0.5 * rough_stamps:
+        return tick, (f"time stamps scattered by up to {1e3 * dev.max():.3g} ms around a uniform {1e3 * slope:.4g} ms "
+                      "tick, on which the motor angle is smoother: the tick is used")
+    return t, None
 
 
 def _str_list(path, table, key, where) -> tuple[str, ...]:
@@ -99,11 +162,17 @@ def _str_list(path, table, key, where) -> tuple[str, ...]:
     return tuple(value)
 
 
+_JOINT_NAME = re.compile(r"[A-Za-z0-9_\-][A-Za-z0-9_.\-]{0,63}")
+
+
 def _parse_joint(path, tab, i, has_markers: bool, has_controller: bool) -> JointSpec:
     where = f"joints[{i}]"
     if not isinstance(tab, dict):
-        raise InputError(path, where, "a [[joints]] table", repr(tab))
+        raise InputError(path, where, "a [[joints]] table", describe(tab))
     name = require(path, tab, "name", str, where)
+    if not _JOINT_NAME.fullmatch(name):
+        raise InputError(path, f"{where}.name", "a joint name of 1-64 letters, digits, '_', '-' or '.', not starting "
+                         "with '.' (it names output files)", describe(name))
     where = f"joints[{name}]"
     gear = (require(path, tab, "gear_ratio", (int, float), where) if has_controller
             else require(path, tab, "gear_ratio", (int, float), where, default=1.0))
@@ -145,7 +214,12 @@ def _bundle_file(root: Path, toml_path: Path, field: str, name: str) -> Path:
     followed) it must lie under the bundle's own resolved directory, unless allowed
     (:func:`files_outside_bundle`). The message names the path given, never the file's text."""
     p = root / name
-    if not _OUTSIDE.get() and not p.resolve().is_relative_to(root.resolve()):
+    try:
+        real = p.resolve()
+    except (RuntimeError, OSError) as e:                 # a symlink loop
+        raise InputError(toml_path, field, f"a file inside the bundle {root}", f"{describe(name)}: {type(e).__name__}",
+                         hint="a symlink that leads to itself") from None
+    if not _OUTSIDE.get() and not real.is_relative_to(root.resolve()):
         raise InputError(toml_path, field, f"a file inside the bundle {root}", f"{name!r}, which resolves outside it",
                          hint="pass --allow-outside-bundle to read files elsewhere")
     if not p.is_file():
@@ -181,8 +255,9 @@ def load_recording(path: str | os.PathLike[str]) -> Recording:
         mk = require(toml_path, doc, "markers", dict)
         marker_file = require(toml_path, mk, "file", str, "markers")
         offset = float(require(toml_path, mk, "clock_offset_s", (int, float), "markers", default=0.0))
-        if not np.isfinite(offset):
-            raise InputError(toml_path, "markers.clock_offset_s", "a finite offset in seconds", offset)
+        if not (np.isfinite(offset) and abs(offset) <= 86400.0):
+            raise InputError(toml_path, "markers.clock_offset_s", "a finite offset in seconds, at most a day",
+                             describe(offset))
     controller_file, time_column = "", "time"
     if has_controller:
         ct = require(toml_path, doc, "controller", dict)
@@ -210,6 +285,12 @@ def load_recording(path: str | os.PathLike[str]) -> Recording:
         if not (np.isfinite(tol) and tol >= 0):
             raise InputError(toml_path, "sync.duration_tolerance_s", "a non-negative, finite tolerance in seconds", tol)
         _check_spans(toml_path, markers, controller, offset, tol)
+        if markers.n_frames > 1 and controller.n_samples > 1:
+            fs_c = 1.0 / float(np.median(np.diff(controller.t)))
+            if fs_c < 0.5 * markers.rate_hz:
+                raise InputError(root / controller_file, f"column {time_column!r}",
+                                 f"a controller log at half the mocap rate at least ({0.5 * markers.rate_hz:g} Hz: the "
+                                 "motor angle is interpolated at every mocap frame)", f"{fs_c:.3g} Hz")
 
     urdf = rig = detections = None
     model = require(toml_path, doc, "model", dict, default={})
@@ -219,8 +300,14 @@ def load_recording(path: str | os.PathLike[str]) -> Recording:
     if "file" in rig_tab:
         rig = read_rig(_bundle_file(root, toml_path, "rig.file", require(toml_path, rig_tab, "file", str, "rig")))
     if "detections" in rig_tab:
-        detections = read_detections(
-            _bundle_file(root, toml_path, "rig.detections", require(toml_path, rig_tab, "detections", str, "rig")))
+        det_path = _bundle_file(root, toml_path, "rig.detections", require(toml_path, rig_tab, "detections", str, "rig"))
+        detections = read_detections(det_path)
+        if rig is not None and detections.camera.size:
+            bad = (detections.camera < 0) | (detections.camera >= len(rig.cameras))
+            if bad.any():
+                i = int(np.argmax(bad))
+                raise InputError(det_path, f"column 'camera' (row {i + 2})",
+                                 f"a camera index of the rig, 0-{len(rig.cameras) - 1}", int(detections.camera[i]))
 
     return Recording(
         name=name, markers=markers, controller=controller, joints=joints, clock_offset_s=offset,

@@ -12,7 +12,7 @@ import tomli_w
 from ..errors import InputError, not_utf8
 from .atomic import write_text_atomic
 
-__all__ = ["read_toml", "write_toml", "check_format", "require"]
+__all__ = ["read_toml", "write_toml", "check_format", "require", "describe"]
 
 
 def read_toml(path: str | os.PathLike[str]) -> dict:
@@ -38,9 +38,9 @@ def check_format(path, doc: dict, kind: str, supported: int) -> int:
     """Check ``format = "mocapfj.<kind>/<N>"``; return N. Newer N than `supported` is an error."""
     want = f"mocapfj.{kind}/{supported}"
     fmt = doc.get("format")
-    m = re.fullmatch(rf"mocapfj\.{re.escape(kind)}/(\d+)", fmt) if isinstance(fmt, str) else None
+    m = re.fullmatch(rf"mocapfj\.{re.escape(kind)}/(\d{{1,6}})", fmt) if isinstance(fmt, str) else None
     if m is None:
-        raise InputError(path, "format", f'format = "{want}"', repr(fmt))
+        raise InputError(path, "format", f'format = "{want}"', describe(fmt))
     version = int(m.group(1))
     if version > supported:
         raise InputError(
@@ -62,10 +62,21 @@ def require(path, table: dict, key: str, kind: type | tuple[type, ...], where: s
         raise InputError(path, name, f"a value of type {_type_name(kind)}", "nothing (key missing)")
     value = table[key]
     if isinstance(value, bool) and bool not in (kind if isinstance(kind, tuple) else (kind,)):
-        raise InputError(path, name, f"a value of type {_type_name(kind)}", repr(value))
+        raise InputError(path, name, f"a value of type {_type_name(kind)}", describe(value))
     if not isinstance(value, kind):
-        raise InputError(path, name, f"a value of type {_type_name(kind)}", repr(value))
+        raise InputError(path, name, f"a value of type {_type_name(kind)}", describe(value))
     return value
+
+
+def describe(value, width: int = 40) -> str:
+    """A short account of a TOML value for a message: its type for tables and arrays, a string or
+    number cut to `width` characters (a message never reprints a file's content)."""
+    if isinstance(value, dict):
+        return f"a table of {len(value)} keys"
+    if isinstance(value, list):
+        return f"an array of {len(value)} items"
+    text = repr(value)
+    return text if len(text) <= width else text[:width - 3] + "..."
 
 
 def _type_name(kind) -> str:

@@ -57,7 +57,10 @@ def read_trc(path: str | os.PathLike[str]) -> MarkerTrajectories:
                          f"{float(t[bad[0] + 1])!r} after {float(t[bad[0]])!r} at data row {bad[0] + 2}")
     xyz = table[:, 2:].reshape(len(table), n_markers, 3) * factor
     xyz[np.isnan(xyz).any(axis=2)] = np.nan
-    return MarkerTrajectories(t=t, xyz=xyz, labels=tuple(labels), rate_hz=rate)
+    try:
+        return MarkerTrajectories(t=t, xyz=xyz, labels=tuple(labels), rate_hz=rate)
+    except InputError as e:                 # the container's own checks: name this file
+        raise InputError(path, e.field, e.expected, e.got, e.hint) from None
 
 
 _EMPTY = re.compile(r"(?<![^\t])(?=\t|$)")  # an empty cell: at line start or after a tab, before a tab or the end

@@ -53,6 +53,8 @@ def summarize_recording(rec: Recording) -> dict:
     controller = None if ctl is None else {
         "file": rec.controller_file, "n_samples": ctl.n_samples, "rate_hz": ctl.rate_hz,
         "t_start_s": float(ctl.t[0]), "t_end_s": float(ctl.t[-1]), "extra_columns": list(ctl.extra)}
+    if ctl is not None and ctl.time_note:
+        controller["time_note"] = ctl.time_note
     return {
         "name": rec.name,
         "root": str(rec.root) if rec.root else None,
@@ -69,7 +71,7 @@ def summarize_recording(rec: Recording) -> dict:
 def inspect_path(path: str | Path) -> dict:
     """Summary of a bundle directory, a recording.toml, or a single C3D/TRC file."""
     path = Path(path)
-    if path.suffix.lower() in (".c3d", ".trc"):
+    if path.suffix.lower() in (".c3d", ".trc") and not path.is_dir():
         return {"markers": summarize_markers(read_markers(path), path.name), "joints": []}
     if not path.exists():
         raise InputError(path, "RECORDING", "a bundle directory, a recording.toml, or a .c3d/.trc file", "no such path")

@@ -94,7 +94,8 @@ def test_rig_urdf_and_detections_travel_with_the_bundle(bundle, tmp_path):
     det = Detections(frame=np.array([0, 0, 1]), camera=np.array([0, 1, 0]), xy_px=np.array([[1.5, 2.5], [3, 4], [5, 6]]),
                      point_id=np.array([2, -1, 0]))
     (tmp_path / "robot.urdf").write_text("<robot name='r'/>")
-    rec = replace(load_recording(bundle), rig=Rig((cam,)), detections=det, urdf=tmp_path / "robot.urdf")
+    cam1 = replace(cam, name="c1")                     # the detections name cameras 0 and 1
+    rec = replace(load_recording(bundle), rig=Rig((cam, cam1)), detections=det, urdf=tmp_path / "robot.urdf")
     write_recording(rec, tmp_path / "full")
     back = load_recording(tmp_path / "full")
     assert back.urdf.read_text() == "<robot name='r'/>"
