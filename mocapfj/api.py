@@ -33,11 +33,18 @@ def load(path: str | os.PathLike) -> Recording:
     """A recording bundle (its directory or recording.toml), checked (:func:`mocapfj.io.load_recording`)."""
     from .io import load_recording
 
+    if not isinstance(path, (str, os.PathLike)):
+        raise InputError(None, "path", "the path of a bundle or its recording.toml", type(path).__name__)
     return load_recording(path)
 
 
 def _recording(rec: RecordingLike) -> Recording:
-    return rec if isinstance(rec, Recording) else load(rec)
+    if isinstance(rec, Recording):
+        return rec
+    if not isinstance(rec, (str, os.PathLike)):
+        raise InputError(None, "recording", "a Recording, or the path of a bundle or its recording.toml",
+                         type(rec).__name__)
+    return load(rec)
 
 
 def joints(rec: RecordingLike, method: str = "auto"):
@@ -147,6 +154,8 @@ def identify(recordings: RecordingLike | Sequence[RecordingLike], *, method: str
     from .ident.joint import IDENTIFY_METHODS
     from .ident.result import Identification, summarize_trials
 
+    if recordings is None or not isinstance(recordings, (Recording, str, os.PathLike, list, tuple)):
+        raise InputError(None, "recordings", "a recording or a list of them", type(recordings).__name__)
     recs = [recordings] if isinstance(recordings, (Recording, str, os.PathLike)) else list(recordings)
     if not recs:
         raise InputError(None, "recordings", "at least one recording", "none")

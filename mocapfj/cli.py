@@ -382,6 +382,11 @@ def main(argv: Sequence[str] | None = None) -> int:
         if e.code == 128 + signal.SIGTERM:
             print("mocapfj: terminated; nothing was written", file=sys.stderr)
         raise
+    except Exception as e:                   # a check that should have caught it did not
+        text = " ".join(str(e).split())[:300] or type(e).__name__
+        print(f"mocapfj: error: {type(e).__name__}: {text} (an input mocapfj did not check; nothing was written; "
+              "please report it with the input)", file=sys.stderr)
+        return 2
     finally:
         if previous is not None:
             signal.signal(signal.SIGTERM, previous)

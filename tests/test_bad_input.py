@@ -466,3 +466,59 @@ def test_jittered_stamps_of_a_uniform_log_are_put_back_on_its_tick(bundle, tmp_p
     clean = json.loads(_cli("joints", bundle, "--out", tmp_path / "c", "--json").stdout)["joints"][0]
     got = json.loads(_cli("joints", b, "--out", tmp_path / "o", "--json").stdout)["joints"][0]
     assert got["deflection_rms_rad"] == pytest.approx(clean["deflection_rms_rad"], rel=1e-3)
+
+
+# -- a second sweep: scenario files, URDFs, the Python API ---------------------------------------
+
+@pytest.mark.parametrize("old, new, says", [
+    ("controller_hz = 1000.0", "controller_hz = 1e9", "measurement.controller_hz: expected a rate in (0, 20000] Hz"),
+    ("n_cameras = 8", "n_cameras = 100000", "measurement.n_cameras: expected 2 to 64 cameras"),
+    ("marker_noise_m = 2.0e-4", "marker_noise_m = -1e-4", "measurement.marker_noise_m: expected a finite value >= 0")])
+def test_a_scenario_that_would_exhaust_the_machine_or_crash(tmp_path, old, new, says):
+    """controller_hz = 1e9 or 100000 cameras were killed for memory (24 GB), a negative noise a
+    traceback: each is one line naming the scenario file and key, at once."""
+    from pathlib import Path
+
+    text = (Path(__file__).resolve().parents[1] / "datasets" / "pa10_joint2.toml").read_text()
+    assert old in text
+    scn = tmp_path / "s.toml"
+    scn.write_text(text.replace(old, new, 1))
+    _one_line_error(_cli("simulate", scn, "--out", tmp_path / "o", "--duration", "2", timeout=60), f"s.toml: {says}")
+
+
+def test_a_transmission_error_of_1000_rad_is_refused_not_simulated_forever(tmp_path):
+    from pathlib import Path
+
+    src = Path(__file__).resolve().parents[1] / "datasets" / "suite" / "transmission_error_ident.toml"
+    import re
+
+    head, effects = src.read_text().split("[[effects]]", 1)
+    text = head + "[[effects]]" + re.sub(r"amplitudes_rad = \[[^\]]*\]", "amplitudes_rad = [1e3, 1e3]", effects, count=1)
+    (tmp_path / "te.toml").write_text(text)
+    _one_line_error(_cli("simulate", tmp_path / "te.toml", "--out", tmp_path / "o", "--duration", "2", timeout=60),
+                    "te.toml: effects[0].amplitudes_rad: expected values in [-0.1, 0.1]")
+
+
+def test_a_bad_urdf_is_one_error_and_the_parser_stays_quiet(capfd):
+    from mocapfj import InputError
+    from mocapfj.io.urdf import build_pin_model
+
+    good = ('<robot name="r"><link name="base"/><link name="l1"><inertial><mass value="{m}"/>'
+            '<inertia ixx="1" ixy="0" ixz="0" iyy="1" iyz="0" izz="1"/></inertial></link>'
+            '<joint name="j1" type="revolute"><parent link="base"/><child link="l1"/><axis xyz="0 0 1"/>'
+            '<limit lower="-1" upper="1" effort="1" velocity="1"/></joint></robot>')
+    assert build_pin_model(good.format(m=2.0)).njoints == 2
+    for text, says in ((good.format(m="nan"), "mass \\[nan\\] is not a float"), ("<robot", "XML_ERROR")):
+        with pytest.raises(InputError, match=rf"<URDF string>: urdf: expected a valid URDF, got .*{says}"):
+            build_pin_model(text)
+    assert capfd.readouterr().err == ""
+
+
+def test_the_api_refuses_what_is_not_a_recording():
+    import mocapfj
+    from mocapfj import InputError
+
+    for call in (lambda: mocapfj.load(None), lambda: mocapfj.joints(42), lambda: mocapfj.identify(None),
+                 lambda: mocapfj.signals([])):
+        with pytest.raises(InputError, match="expected"):
+            call()

@@ -17,7 +17,6 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from os import PathLike
-from pathlib import Path
 
 import numpy as np
 import pinocchio as pin
@@ -99,19 +98,9 @@ class NLinkModel(FlexibleJointModel):
 
         gravity : (3,) m/s^2 in the URDF world frame. Other keywords as in the constructor.
         """
-        text = str(urdf) if not isinstance(urdf, str) else urdf
-        try:
-            if text.lstrip().startswith("<"):
-                model = pin.buildModelFromXML(text)
-            else:
-                if not Path(text).is_file():
-                    raise InputError(text, "urdf", "an existing URDF file or a URDF XML string")
-                model = pin.buildModelFromUrdf(text)
-        except (RuntimeError, ValueError) as exc:
-            if isinstance(exc, InputError):
-                raise
-            raise InputError(None if text.lstrip().startswith("<") else text, "urdf", "a valid URDF",
-                             str(exc).splitlines()[0] if str(exc) else type(exc).__name__) from None
+        from ..io.urdf import build_pin_model
+
+        model = build_pin_model(urdf)
         g = np.asarray(gravity, dtype=np.float64)
         if g.shape != (3,) or not np.isfinite(g).all():
             raise InputError(None, "gravity", "a (3,) vector in m/s^2", gravity)

@@ -21,7 +21,6 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from os import PathLike
-from pathlib import Path
 
 import numpy as np
 import pinocchio as pin
@@ -43,18 +42,9 @@ def load_pin_model(model: "pin.Model | str | PathLike[str]") -> "pin.Model":
     Only 1-DoF joints (revolute, continuous, prismatic: nq = nv = njoints - 1) are accepted.
     """
     if not isinstance(model, pin.Model):
-        text = str(model)
-        try:
-            if text.lstrip().startswith("<"):
-                model = pin.buildModelFromXML(text)
-            elif Path(text).is_file():
-                model = pin.buildModelFromUrdf(text)
-            else:
-                raise InputError(text, "urdf", "a pin.Model, a URDF XML string or an existing URDF file")
-        except (RuntimeError, ValueError) as exc:
-            if isinstance(exc, InputError):
-                raise
-            raise InputError(None, "urdf", "a valid URDF", str(exc).splitlines()[0] if str(exc) else type(exc).__name__) from None
+        from ..io.urdf import build_pin_model
+
+        model = build_pin_model(model)
     if not (model.nq == model.nv == model.njoints - 1):
         raise InputError(None, "model", "only 1-DoF joints (nq = nv = number of joints)",
                          f"nq {model.nq}, nv {model.nv}, {model.njoints - 1} joints")

@@ -102,11 +102,9 @@ class ChainModel:
     @classmethod
     def from_urdf(cls, urdf: str | Path, templates, *, T_world_root=None) -> ChainModel:
         """From URDF text (a string starting with ``<``) or a URDF file path; see `from_model`."""
-        import pinocchio as pin
+        from ..io.urdf import build_pin_model
 
-        text = str(urdf)
-        model = pin.buildModelFromXML(text) if text.lstrip().startswith("<") else pin.buildModelFromUrdf(text)
-        return cls.from_model(model, templates, T_world_root=T_world_root)
+        return cls.from_model(build_pin_model(urdf), templates, T_world_root=T_world_root)
 
     @classmethod
     def from_model(cls, model, templates: Mapping[str, tuple[Sequence[str], np.ndarray]], *,

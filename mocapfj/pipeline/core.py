@@ -132,12 +132,20 @@ def run_simulate(scenario: str | Path, out: str | Path, duration_s: float | None
     from ..synth.record import record_scenario, write_scenario_bundle
     from ..synth.scenario import load_scenario
 
+    from ..synth.scenario import check_size
+
     scn = load_scenario(scenario)
     if duration_s is not None:
         if not duration_s > 0:
             raise InputError(None, "--duration", "a positive duration in s", duration_s)
         scn = scn.with_duration(duration_s)
-    sr = record_scenario(scn, with_concealment=concealment)
+        check_size("--duration", scn)
+    try:
+        sr = record_scenario(scn, with_concealment=concealment)
+    except InputError as e:
+        if e.file == "<argument>":              # a model element's own check: name the scenario
+            raise InputError(scenario, e.field, e.expected, e.got, e.hint) from None
+        raise
     write_scenario_bundle(sr, out, Path(scenario))
     n_images = _write_images(scn, sr, Path(out) / "images") if images else 0
     summary = summarize_recording(load_recording(out))

@@ -23,6 +23,7 @@ the true system, and the nominal system is the same scenario without its effects
 
 from __future__ import annotations
 
+import math
 import os
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -56,6 +57,16 @@ _EFFECT_REQUIRED = {
     "stribeck": {"friction"}, "friction_asymmetry": {"friction"}, "time_delay": {"delay_s"},
     "coupling": {"source", "inertia_kgm2"}, "gravity_mismatch": {"k", "a", "b"}, "drive_gain": {"gain"},
 }
+
+
+_EFFECT_BOUNDS = {
+    ("time_delay", "delay_s"): (0.0, 1.0),
+    ("transmission_error", "amplitudes_rad"): (-0.1, 0.1),
+    ("backlash", "gap_rad"): (0.0, 0.1),
+    ("coupling", "inertia_kgm2"): (0.0, 1e4),
+    ("drive_gain", "gain"): (0.1, 10.0),
+}
+"""Plausible ranges of effect parameters (a transmission error of 1e3 rad hung the simulator)."""
 
 
 @dataclass(frozen=True)
@@ -170,9 +181,50 @@ def _reference(path, tab, where) -> dict:
             "ramp_s": _num(path, ref, "ramp_s", w, default=2.0)}
 
 
+MAX_RATE_HZ = 20000.0
+"""Largest mocap or controller rate a scenario may ask for, Hz."""
+MAX_SAMPLES = 5e7
+"""Largest number of controller samples (duration x rate) one simulation may produce."""
+MAX_CAMERAS = 64
+
+
+def check_size(path, scn: "Scenario") -> None:
+    """Bounds that keep a simulation within this machine's time and memory: rates, the number of
+    samples (duration x rate), cameras; InputError naming the key."""
+    m = scn.measurement
+    for key in ("mocap_hz", "controller_hz"):
+        v = getattr(m, key)
+        if not (math.isfinite(v) and 0 < v <= MAX_RATE_HZ):
+            raise InputError(path, f"measurement.{key}", f"a rate in (0, {MAX_RATE_HZ:g}] Hz", v)
+    n = scn.duration_s * max(m.controller_hz, m.mocap_hz)
+    if not n <= MAX_SAMPLES:
+        raise InputError(path, "duration_s", f"a duration x rate of at most {MAX_SAMPLES:g} samples",
+                         f"{scn.duration_s:g} s x {max(m.controller_hz, m.mocap_hz):g} Hz")
+    if not (2 <= m.n_cameras <= MAX_CAMERAS):
+        raise InputError(path, "measurement.n_cameras", f"2 to {MAX_CAMERAS} cameras", m.n_cameras)
+    for key in ("marker_noise_m", "pixel_noise_px", "torque_noise_Nm", "dropout_rate"):
+        v = getattr(m, key)
+        if not (math.isfinite(v) and v >= 0):
+            raise InputError(path, f"measurement.{key}", "a finite value >= 0", v)
+
+
 def load_scenario(path: str | os.PathLike[str]) -> Scenario:
-    """Parse and check a scenario file (format ``mocapfj.scenario/1``)."""
+    """Parse and check a scenario file (format ``mocapfj.scenario/1``); every error names the file."""
     path = Path(path)
+    try:
+        scn = _load_scenario(path)
+    except InputError as e:
+        if e.file == "<argument>":                 # a check of a model element: name this file
+            raise InputError(path, e.field, e.expected, e.got, e.hint) from None
+        raise
+    except (ValueError, TypeError) as e:          # a value the model elements cannot take
+        raise InputError(path, "scenario", "values the simulator accepts",
+                         str(e).splitlines()[0][:200] if str(e) else type(e).__name__) from None
+    check_size(path, scn)
+    return scn
+
+
+def _load_scenario(path: Path) -> Scenario:
     doc = read_toml(path)
     check_format(path, doc, "scenario", 1)
     name = require(path, doc, "name", str, default=path.stem)
@@ -238,6 +290,14 @@ def load_scenario(path: str | os.PathLike[str]) -> Scenario:
                              f"unknown {extra}" if extra else f"missing {missing}")
         if ename == "coupling" and params["source"] not in names:
             raise InputError(path, f"{w}.source", f"one of the scenario's joints {names}", repr(params["source"]))
+        for key, value in params.items():
+            vals = value if isinstance(value, list) else [value]
+            if all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in vals) and vals:
+                if not all(math.isfinite(v) for v in vals):
+                    raise InputError(path, f"{w}.{key}", "finite numbers", value)
+                lo, hi = _EFFECT_BOUNDS.get((ename, key), (-math.inf, math.inf))
+                if not all(lo <= v <= hi for v in vals):
+                    raise InputError(path, f"{w}.{key}", f"values in [{lo:g}, {hi:g}]", value)
         effects.append(Effect(ename, joint, params))
 
     return Scenario(
