@@ -522,3 +522,27 @@ def test_the_api_refuses_what_is_not_a_recording():
                  lambda: mocapfj.signals([])):
         with pytest.raises(InputError, match="expected"):
             call()
+
+
+@pytest.mark.parametrize("old, new, says", [("k = ", "k = -1.0 #", "spring.k: expected a positive, finite stiffness"),
+                                            ("gear_ratio = ", "gear_ratio = 0.0 #", "gear_ratio: expected a positive"),
+                                            ("I = ", "I = -5.0 #", "].I: expected a positive, finite number")])
+def test_a_model_file_with_impossible_values(tmp_path, old, new, says):
+    """discover --model: a negative stiffness or a zero gear ratio was simulated (exit 0), a
+    negative inertia failed as <argument>: each names the model file and key."""
+    from pathlib import Path
+
+    from mocapfj import InputError
+    from mocapfj.discover import read_model_file
+    from mocapfj.discover.model import write_model_file
+
+    scn = Path(__file__).resolve().parents[1] / "datasets" / "pa10_joint2.toml"
+    good = tmp_path / "good.toml"
+    write_model_file(good, read_model_file(scn).values())
+    text = good.read_text()
+    assert old in text
+    bad = tmp_path / "bad.toml"
+    bad.write_text(text.replace(old, new, 1))
+    with pytest.raises(InputError) as e:
+        read_model_file(bad)
+    assert str(e.value).startswith(f"{bad}: joints[j2]") and says in str(e.value) and "\n" not in str(e.value)

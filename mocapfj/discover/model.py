@@ -28,7 +28,7 @@ import numpy as np
 from ..dynamics import JointModel, PositionTorque, PrescribedMotor, TransmissionError, shift_signal, simulate
 from ..dynamics.spec import FRICTION_MODELS, SPRING_MODELS, element_from_table
 from ..errors import InputError
-from ..io.tomlio import read_toml, require, write_toml
+from ..io.tomlio import describe, read_toml, require, write_toml
 
 __all__ = ["JointModel", "read_model_file", "write_model_file", "fit_pct", "simulate_joint", "OutputError"]
 
@@ -40,9 +40,20 @@ def _joint_from_table(tab: dict, path, i: int) -> JointModel:
     name = require(path, tab, "name", str, w)
     w = f"joints[{name}]"
     num = {k: float(require(path, tab, k, (int, float), w)) for k in ("I", "J", "mglx", "mgly", "b")}
+    for k, v in num.items():
+        ok = np.isfinite(v) and (v > 0 if k in ("I", "J") else v >= 0 if k == "b" else True)
+        if not ok:
+            what = "positive" if k in ("I", "J") else "non-negative" if k == "b" else "finite"
+            raise InputError(path, f"{w}.{k}", f"a {what}, finite number", v)
     gear = float(require(path, tab, "gear_ratio", (int, float), w, default=1.0))
+    if not (np.isfinite(gear) and gear > 0):
+        raise InputError(path, f"{w}.gear_ratio", "a positive, finite gear ratio", gear)
     fr = element_from_table(require(path, tab, "friction", dict, w), FRICTION_MODELS, path, f"{w}.friction")
     sp = element_from_table(require(path, tab, "spring", dict, w), SPRING_MODELS, path, f"{w}.spring")
+    for key in ("k", "k1", "k0"):
+        stiff = getattr(sp, key, None)
+        if stiff is not None and not (np.isfinite(stiff) and stiff > 0):
+            raise InputError(path, f"{w}.spring.{key}", "a positive, finite stiffness in N m/rad", stiff)
     te = pt = None
     if "transmission_error" in tab:
         t = tab["transmission_error"]
@@ -70,8 +81,18 @@ def read_model_file(path: str | Path) -> dict[str, JointModel]:
         raise InputError(path, "format", f'"{MODEL_FORMAT}" (or a "mocapfj.scenario/1" file)', repr(fmt))
     joints = doc.get("joints")
     if not isinstance(joints, list) or not joints:
-        raise InputError(path, "joints", "one [[joints]] table per joint", repr(joints))
-    return {m.name: m for m in (_joint_from_table(t, path, i) for i, t in enumerate(joints))}
+        raise InputError(path, "joints", "one [[joints]] table per joint", describe(joints))
+    try:
+        models = [_joint_from_table(t, path, i) for i, t in enumerate(joints)]
+    except InputError as e:
+        if e.file == "<argument>":              # a model element's own check: name this file
+            raise InputError(path, e.field, e.expected, e.got, e.hint) from None
+        raise
+    names = [m.name for m in models]
+    if len(set(names)) != len(names):
+        raise InputError(path, "joints.name", "one table per joint", f"{sorted({n for n in names if names.count(n) > 1})} "
+                         "more than once")
+    return {m.name: m for m in models}
 
 
 def write_model_file(path: str | Path, models, effects: list[dict] | None = None) -> None:
