@@ -72,7 +72,8 @@ def element_from_table(table: dict, registry: dict | None = None, source=None, w
     """
     registry = _ALL if registry is None else registry
     if not isinstance(table, dict) or "model" not in table:
-        raise InputError(source, where, f'a table with a "model" key, one of {sorted(registry)}', repr(table))
+        got = f"a table without one ({len(table)} keys)" if isinstance(table, dict) else type(table).__name__
+        raise InputError(source, where, f'a table with a "model" key, one of {sorted(registry)}', got)
     name = table["model"]
     if name not in registry:
         raise InputError(source, f"{where}.model", f"one of {sorted(registry)}", repr(name))
