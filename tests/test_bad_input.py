@@ -546,3 +546,16 @@ def test_a_model_file_with_impossible_values(tmp_path, old, new, says):
     with pytest.raises(InputError) as e:
         read_model_file(bad)
     assert str(e.value).startswith(f"{bad}: joints[j2]") and says in str(e.value) and "\n" not in str(e.value)
+
+
+@pytest.mark.parametrize("old, new, says", [("seed = ", "seed = -1 #", "seed: expected a non-negative integer"),
+                                            ("n_cameras = 8", "n_cameras = 8.5", "n_cameras: expected an integer"),
+                                            ('"L2_2"', '"L2_1"', "link_markers: expected 3 or more distinct marker labels")])
+def test_scenario_values_the_simulator_cannot_take(tmp_path, old, new, says):
+    from pathlib import Path
+
+    text = (Path(__file__).resolve().parents[1] / "datasets" / "pa10_joint2.toml").read_text()
+    assert old in text
+    (tmp_path / "s.toml").write_text(text.replace(old, new, 1))
+    _one_line_error(_cli("simulate", tmp_path / "s.toml", "--out", tmp_path / "o", "--duration", "2", timeout=60),
+                    f"s.toml: ", says)

@@ -35,7 +35,7 @@ from ..dynamics import (Backlash, Drivetrain, GravityBalancer, PositionDependent
 from ..dynamics.spec import FRICTION_MODELS, SPRING_MODELS
 from ..errors import InputError
 from ..validate import check_scalar
-from ..io.tomlio import check_format, read_toml, require
+from ..io.tomlio import check_format, describe, read_toml, require
 
 __all__ = ["EFFECTS", "Scenario", "ScenarioJoint", "Measurement", "Effect", "load_scenario", "joint_models",
            "reference_trajectory", "joint_friction", "joint_spring", "joint_drivetrain"]
@@ -160,12 +160,21 @@ def _num(path, tab, key, where, default=None, positive=False):
     return check_scalar(v, f"{where}.{key}" if where else key, positive=positive, file=path)
 
 
+def _integer(path, tab, key, where="", default=None) -> int:
+    v = _num(path, tab, key, where, default=default)
+    if v != int(v):
+        raise InputError(path, f"{where}.{key}" if where else key, "an integer", v)
+    return int(v)
+
+
 def _floats(path, tab, key, where, n=None):
     v = require(path, tab, key, list, where)
     try:
         a = tuple(float(x) for x in v)
     except (TypeError, ValueError):
-        raise InputError(path, f"{where}.{key}", "a list of numbers", repr(v)) from None
+        raise InputError(path, f"{where}.{key}", "a list of numbers", describe(v)) from None
+    if not all(math.isfinite(x) for x in a):
+        raise InputError(path, f"{where}.{key}", "finite numbers", describe(v))
     if n is not None and len(a) != n:
         raise InputError(path, f"{where}.{key}", f"{n} numbers", len(a))
     return a
@@ -202,6 +211,17 @@ def check_size(path, scn: "Scenario") -> None:
                          f"{scn.duration_s:g} s x {max(m.controller_hz, m.mocap_hz):g} Hz")
     if not (2 <= m.n_cameras <= MAX_CAMERAS):
         raise InputError(path, "measurement.n_cameras", f"2 to {MAX_CAMERAS} cameras", m.n_cameras)
+    if not 8 <= m.resolver_bits <= 32:
+        raise InputError(path, "measurement.resolver_bits", "8 to 32 bits", m.resolver_bits)
+    if not (0 <= scn.seed < 2 ** 63):
+        raise InputError(path, "seed", "a non-negative integer", scn.seed)
+    for j in scn.joints:
+        labels = list(j.link_markers)
+        if len(labels) < 3 or len(set(labels)) != len(labels) or not all(isinstance(x, str) and x for x in labels):
+            raise InputError(path, f"joints[{j.name}].link_markers", "3 or more distinct marker labels", describe(labels))
+        if not isinstance(j.parent_markers, str) and set(j.parent_markers) & set(labels):
+            raise InputError(path, f"joints[{j.name}].parent_markers", "labels other than the link's",
+                             sorted(set(j.parent_markers) & set(labels)))
     for key in ("marker_noise_m", "pixel_noise_px", "torque_noise_Nm", "dropout_rate"):
         v = getattr(m, key)
         if not (math.isfinite(v) and v >= 0):
@@ -238,6 +258,8 @@ def _load_scenario(path: Path) -> Scenario:
     for f_name, f_default in Measurement.__dataclass_fields__.items():
         if f_name in meas_tab:
             v = _num(path, meas_tab, f_name, "measurement")
+            if isinstance(f_default.default, int) and v != int(v):
+                raise InputError(path, f"measurement.{f_name}", "an integer", v)
             meas_kwargs[f_name] = int(v) if isinstance(f_default.default, int) else v
     unknown = sorted(set(meas_tab) - set(Measurement.__dataclass_fields__))
     if unknown:
@@ -253,7 +275,7 @@ def _load_scenario(path: Path) -> Scenario:
         element_from_table(friction, FRICTION_MODELS, path, f"{w}.friction")  # checked here, built later
         element_from_table(spring, SPRING_MODELS, path, f"{w}.spring")
         control = require(path, tab, "control", dict, w)
-        axis = int(_num(path, tab, "axis", w))
+        axis = _integer(path, tab, "axis", w)
         if not 1 <= axis <= 6:
             raise InputError(path, f"{w}.axis", "a PA-10 joint number from 1 to 6", axis)
         parent = tab.get("parent_markers", "world")
@@ -302,7 +324,7 @@ def _load_scenario(path: Path) -> Scenario:
 
     return Scenario(
         name=name, description=require(path, doc, "description", str, default=""),
-        seed=int(_num(path, doc, "seed", "", default=0)), duration_s=_num(path, doc, "duration_s", "", positive=True),
+        seed=_integer(path, doc, "seed", default=0), duration_s=_num(path, doc, "duration_s", "", positive=True),
         model=model, pose_rad=pose, payload_kg=_num(path, robot, "payload_kg", "robot", default=0.0),
         joints=tuple(joints), effects=tuple(effects), measurement=Measurement(**meas_kwargs), source=path, doc=doc)
 
