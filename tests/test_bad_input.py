@@ -33,6 +33,27 @@ def bundle(tmp_path_factory):
     return d
 
 
+def _edit_csv(b, fn):
+    """The bundle's controller CSV rewritten by fn(head, rows) -> rows (rows: lists of cells);
+    returns the file and its header."""
+    csv = b / "controller.csv" if (b / "controller.csv").is_file() else next(b.glob("*.csv"))
+    lines = csv.read_text().splitlines()
+    head = lines[0].split(",")
+    rows = fn(head, [ln.split(",") for ln in lines[1:]])
+    csv.write_text("\n".join([lines[0]] + [",".join(r) for r in rows]) + "\n")
+    return csv, head
+
+
+def _set_column(prefix, f):
+    """An _edit_csv function: the first column whose name starts with prefix mapped by f (cell -> cell)."""
+    def edit(head, rows):
+        j = next(i for i, c in enumerate(head) if c.startswith(prefix))
+        for r in rows:
+            r[j] = f(r[j])
+        return rows
+    return edit
+
+
 def _copy(bundle, tmp_path):
     import shutil
 
@@ -58,12 +79,7 @@ def test_a_non_utf8_byte_in_the_controller_csv(bundle, tmp_path):
 
 def test_a_torque_column_of_zeros(bundle, tmp_path):
     b = _copy(bundle, tmp_path)
-    csv = next(b.glob("*.csv"))
-    lines = csv.read_text().splitlines()
-    head = lines[0].split(",")
-    j = next(i for i, c in enumerate(head) if c.startswith("tau"))
-    rows = [",".join("0" if k == j else v for k, v in enumerate(ln.split(","))) for ln in lines[1:]]
-    csv.write_text("\n".join([lines[0]] + rows) + "\n")
+    _edit_csv(b, _set_column("tau", lambda v: "0"))
     _one_line_error(_cli("identify", b, "--out", tmp_path / "o", "--method", "two_step"),
                     "controller log tau", "expected a motor torque that varies", "the constant 0 in all")
 
@@ -171,12 +187,12 @@ def test_a_file_outside_the_bundle_is_refused_without_printing_it(bundle, tmp_pa
 
 def test_a_bad_cell_is_located_not_echoed(bundle, tmp_path):
     b = _copy(bundle, tmp_path)
-    csv = next(b.glob("*.csv"))
-    lines = csv.read_text().splitlines()
-    cells = lines[3].split(",")
-    cells[1] = "secret"
-    lines[3] = ",".join(cells)
-    csv.write_text("\n".join(lines) + "\n")
+
+    def secret(head, rows):
+        rows[2][1] = "secret"
+        return rows
+
+    _edit_csv(b, secret)
     r = _cli("inspect", b)
     _one_line_error(r, "row 4 column", "expected a number, got 6 characters of text")
     assert "secret" not in r.stderr
@@ -199,15 +215,7 @@ def _shift_controller(src, dst, seconds):
     import shutil
 
     shutil.copytree(src, dst)
-    csv = dst / "controller.csv"
-    lines = csv.read_text().splitlines()
-    i = lines[0].split(",").index("time")
-    rows = []
-    for ln in lines[1:]:
-        c = ln.split(",")
-        c[i] = repr(float(c[i]) + seconds)
-        rows.append(",".join(c))
-    csv.write_text("\n".join([lines[0]] + rows) + "\n")
+    _edit_csv(dst, _set_column("time", lambda v: repr(float(v) + seconds)))
     return dst
 
 
@@ -261,13 +269,9 @@ def test_millimetres_labelled_as_metres(bundle, tmp_path):
                                          (2.0, "check gear_ratio")])
 def test_a_motor_angle_in_the_wrong_unit(bundle, tmp_path, scale, says):
     b = _copy(bundle, tmp_path)
-    csv = next(b.glob("*.csv"))
-    lines = csv.read_text().splitlines()
-    head = lines[0].split(",")
-    j = next(i for i, c in enumerate(head) if c.startswith("qm"))
-    rows = [",".join(repr(float(v) * scale) if k == j else v for k, v in enumerate(ln.split(","))) for ln in lines[1:]]
-    csv.write_text("\n".join([lines[0]] + rows) + "\n")
-    _one_line_error(_cli("joints", b, "--out", tmp_path / "o"), f"{csv.name}: {head[j]} (joint",
+    csv, head = _edit_csv(b, _set_column("qm", lambda v: repr(float(v) * scale)))
+    qm = next(c for c in head if c.startswith("qm"))
+    _one_line_error(_cli("joints", b, "--out", tmp_path / "o"), f"{csv.name}: {qm} (joint",
                     "expected a motor angle on the link side", says)
 
 
@@ -429,13 +433,8 @@ def test_the_same_recording_twice_is_not_two_trials(bundle, tmp_path):
 
 
 def _edit_times(b, fn):
-    csv = next(b.glob("*.csv"))
-    lines = csv.read_text().splitlines()
-    i = lines[0].split(",").index("time")
-    rows = [ln.split(",") for ln in lines[1:]]
-    rows = fn(i, rows)
-    csv.write_text("\n".join([lines[0]] + [",".join(r) for r in rows]) + "\n")
-    return csv
+    """_edit_csv with fn(index of the time column, rows) -> rows."""
+    return _edit_csv(b, lambda head, rows: fn(head.index("time"), rows))[0]
 
 
 def test_a_controller_log_with_a_gap_or_at_2_hz(bundle, tmp_path):

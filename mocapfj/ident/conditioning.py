@@ -142,11 +142,7 @@ def controller_on(t_to: np.ndarray, t_ctrl: np.ndarray, x: np.ndarray, fs_ctrl_h
     t_ctrl = np.asarray(t_ctrl, dtype=np.float64)
     x = np.asarray(x, dtype=np.float64)
     fs_to = 1.0 / float(np.median(np.diff(t_to)))
-    step = float(np.median(np.diff(t_ctrl)))
-    if np.max(np.abs(np.diff(t_ctrl) - step)) > 1e-3 * step:
-        # a jittered log: onto its median step first (the filter assumes uniform samples)
-        grid = t_ctrl[0] + step * np.arange(int(np.floor((t_ctrl[-1] - t_ctrl[0]) / step + 1e-9)) + 1)
-        x, t_ctrl = np.interp(grid, t_ctrl, x), grid
+    t_ctrl, (x,), _ = _on_median_step(t_ctrl, x)          # the filter assumes uniform samples
     fc = 0.4 * min(fs_to, fs_ctrl_hz) if cutoff_hz is None else cutoff_hz
     xf = lowpass(x, fs_ctrl_hz, fc) if fc < 0.5 * fs_ctrl_hz else x
     return resample_to(t_ctrl, xf, t_to)
@@ -255,9 +251,17 @@ def controller_span(controller: ControllerLog, j: int, t0: float, t1: float) -> 
     t = controller.t
     i0 = max(int(np.searchsorted(t, t0, side="right")) - 1, 0)
     i1 = min(int(np.searchsorted(t, t1, side="left")) + 1, t.size)
-    tc, qm, u = t[i0:i1], controller.q_m[i0:i1, j], controller.tau[i0:i1, j]
-    dt = float(np.median(np.diff(tc)))
-    grid = tc[0] + dt * np.arange(int(round((tc[-1] - tc[0]) / dt)) + 1)
-    if grid.size != tc.size or np.max(np.abs(grid - tc)) > 1e-3 * dt:
-        qm, u = np.interp(grid, tc, qm), np.interp(grid, tc, u)
+    grid, (qm, u), dt = _on_median_step(t[i0:i1], controller.q_m[i0:i1, j], controller.tau[i0:i1, j])
     return {"t_c": grid, "q_m_c": qm, "u_c": u, "fs_c_hz": 1.0 / dt}
+
+
+def _on_median_step(t: np.ndarray, *xs: np.ndarray) -> tuple[np.ndarray, tuple, float]:
+    """Samples xs at times t on a uniform grid of t's median step from t[0], ending at or before
+    t[-1]: (grid, xs on it, step). Stamps within 1e-3 of a step of the grid keep their values;
+    a jittered log is interpolated."""
+    t = np.asarray(t, dtype=np.float64)
+    step = float(np.median(np.diff(t)))
+    grid = t[0] + step * np.arange(int(np.floor((t[-1] - t[0]) / step + 1e-6)) + 1)
+    if grid.size != t.size or np.max(np.abs(grid - t)) > 1e-3 * step:
+        xs = tuple(np.interp(grid, t, np.asarray(x, dtype=np.float64)) for x in xs)
+    return grid, xs, step

@@ -339,7 +339,7 @@ class _Problem:
     Jacobian, as functions of the free parameters (eps is fixed at 0 under the sign law)."""
 
     def __init__(self, data: _Data, law: str, scale: np.ndarray, noise=None, max_phase: float = 0.05,
-                 cubic: bool = False):
+                 cubic: bool = False, dt: float = 0.0):
         self.d, self.law, self.scale, self.max_phase = data, law, scale, max_phase
         self.free = np.ones(len(OE_NAMES), bool)
         self.cubic = cubic
@@ -350,7 +350,7 @@ class _Problem:
         self.set_noise(noise or ((np.array([1.0]), 1.0), (np.array([1.0]), 1.0)))
         self._cache = (None, None)
         self._x = np.zeros(len(OE_NAMES))
-        self.dt = 0.0                 # the mocap instants' offset on the controller clock, s
+        self.dt = float(dt)           # the mocap instants' offset on the controller clock, s
 
     def set_noise(self, noise):
         """noise = ((a_q, sd_q), (a_u, sd_u)): the whitening filters and innovation SDs."""
@@ -459,6 +459,13 @@ def _bounds():
     return lo, hi
 
 
+def _inside(prob: _Problem, x) -> np.ndarray:
+    """The free parameters of x strictly inside the bounds (I, J, k > 0; one at 0 just above it)."""
+    lo, hi = _bounds()
+    f = prob.free
+    return np.minimum(np.maximum(x[f], lo[f] + 1e-6 * prob.scale[f]), np.where(np.isfinite(hi[f]), 0.999 * hi[f], np.inf))
+
+
 def _solve(prob: _Problem, x0, max_nfev: int, ftol: float = 1e-10):
     """Trust-region reflective least squares from x0 (full vector) over the free parameters:
     (x, cost, evaluations)."""
@@ -468,8 +475,7 @@ def _solve(prob: _Problem, x0, max_nfev: int, ftol: float = 1e-10):
     x0 = np.array(x0, dtype=np.float64)
     prob._x = x0.copy()
     f = prob.free
-    # strictly inside the bounds (I, J, k > 0; a parameter at 0 is started just above it)
-    xf = np.minimum(np.maximum(x0[f], lo[f] + 1e-6 * prob.scale[f]), np.where(np.isfinite(hi[f]), 0.999 * hi[f], np.inf))
+    xf = _inside(prob, x0)
     res = least_squares(prob.fun, xf, jac=prob.jac, bounds=(lo[f], hi[f]), method="trf", x_scale="jac",
                         ftol=ftol, xtol=1e-9, gtol=1e-10, max_nfev=max_nfev)
     return prob.full(res.x), float(res.fun @ res.fun), int(res.nfev)
@@ -563,8 +569,7 @@ def _encoder_noise_shift(q_m_c, fs_c, u_c, t_c, t, q, measured, trim_s, band, la
     steps = []
     for _ in range(replicates):
         d2 = _Data(t_c, q_m_c + rng.normal(0.0, sm, q_m_c.size), u_c, fs_c, t, q, measured, trim_s, band)
-        p2 = _Problem(d2, law, scale, noise, cubic=prob.cubic)
-        p2.dt = prob.dt
+        p2 = _Problem(d2, law, scale, noise, cubic=prob.cubic, dt=prob.dt)
         J = p2.jac_full(x)[:, free]
         r = p2.fun(x[p2.free])
         sc = np.linalg.norm(J, axis=0)
@@ -601,13 +606,11 @@ def _wiener_drive_shift(q_m_c, fs_c, u_c, t_c, t, q, measured, trim_s, band, law
     minimum at very different splits (grid case: I 0.07 raw, 0.38 Wiener-driven, true 0.32)."""
     d2 = _Data(t_c, q_m_c, u_c, fs_c, t, q, measured, trim_s, band, drive=wiener_drive(q_m_c, fs_c))
     noise = ((prob.a_q, prob.s_q), (prob.a_u, prob.s_u))
-    search = _Problem(d2, law, scale, noise, max_phase=0.15, cubic=prob.cubic)
+    search = _Problem(d2, law, scale, noise, max_phase=0.15, cubic=prob.cubic, dt=prob.dt)
     search.free = prob.free & free
-    search.dt = prob.dt
     best = _search_split(x, lambda xs: _solve(search, xs, 8, 1e-6)[:2])
-    p2 = _Problem(d2, law, scale, noise, cubic=prob.cubic)
+    p2 = _Problem(d2, law, scale, noise, cubic=prob.cubic, dt=prob.dt)
     p2.free = search.free
-    p2.dt = prob.dt
     x2, _, _ = _solve(p2, best[1], 20, 1e-8)
     return np.where(free, x2 - x, 0.0)
 
@@ -745,7 +748,7 @@ def _clock_offset_fit(prob: _Problem, x, budget: int = 30) -> tuple:
     f = p2.free
     lo, hi = _bounds()
     x = np.asarray(x, dtype=np.float64)
-    xf = np.minimum(np.maximum(x[f], lo[f] + 1e-6 * prob.scale[f]), np.where(np.isfinite(hi[f]), 0.999 * hi[f], np.inf))
+    xf = _inside(prob, x)
     p2._x = x.copy()
     zeros_u = np.zeros(d.u_b.shape)
 
@@ -879,8 +882,7 @@ def identify_output_error(t, q, q_m, u, *, fs_hz: float, measured=None, controll
         given models. coarse or search: a 3x coarser simulation and a looser tolerance (the
         searches before the final fit)."""
         nonlocal nfev
-        prob = _Problem(data_at(b_hz), law, scale, max_phase=0.15 if coarse or search else 0.05, cubic=cubic)
-        prob.dt = dt
+        prob = _Problem(data_at(b_hz), law, scale, max_phase=0.15 if coarse or search else 0.05, cubic=cubic, dt=dt)
         ftol = 1e-6 if coarse or search else 1e-10
         if noise is None or noise == "white":
             r_q, r_u = prob.raw(x_start)
@@ -992,8 +994,9 @@ def identify_output_error(t, q, q_m, u, *, fs_hz: float, measured=None, controll
             x_loc, dt_abs, sd_dt, _, slope = _clock_offset_fit(p_dt, x_loc)
             p_dt.dt = dt_abs
             cost_dt = float(np.sum(p_dt.fun(x_loc[p_dt.free]) ** 2))
-            p_0 = _Problem(data_at(band), law, scale, ((p_dt.a_q, p_dt.s_q), (p_dt.a_u, p_dt.s_u)), cubic=prob.cubic)
-            p_0.free, p_0.dt = p_dt.free.copy(), clock_offset_s
+            p_0 = _Problem(data_at(band), law, scale, ((p_dt.a_q, p_dt.s_q), (p_dt.a_u, p_dt.s_u)), cubic=prob.cubic,
+                           dt=clock_offset_s)
+            p_0.free = p_dt.free.copy()
             _, cost_0, n = _solve(p_0, x, 20, 1e-8)
             nfev += n
             chi2 = cost_0 - cost_dt

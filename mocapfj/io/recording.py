@@ -14,7 +14,6 @@ import copy
 import os
 import re
 import shutil
-import warnings
 from pathlib import Path
 
 import numpy as np
@@ -342,13 +341,14 @@ def _check_cluster_size(path, markers: MarkerTrajectories, joint: str, labels: l
     if len(labels) < 2:
         return
     xyz = markers.xyz[:, [markers.index(s) for s in labels]]               # (T, M, 3)
-    d = np.linalg.norm(xyz[:, :, None] - xyz[:, None], axis=-1)           # (T, M, M)
-    with np.errstate(invalid="ignore"), warnings.catch_warnings():
-        warnings.simplefilter("ignore", RuntimeWarning)                  # frames with every marker lost
-        span = np.nanmax(np.where(np.isnan(d), -np.inf, d).reshape(d.shape[0], -1), axis=1)
-        span = float(np.nanmedian(span[np.isfinite(span) & (span > 0)])) if np.isfinite(span).any() else float("nan")
+    d = np.linalg.norm(xyz[:, :, None] - xyz[:, None], axis=-1)           # (T, M, M), NaN where lost
+    per_frame = np.nan_to_num(d, nan=0.0).reshape(d.shape[0], -1).max(axis=1)
+    seen = per_frame[per_frame > 0]                                       # frames with two markers
+    if not seen.size:
+        return
+    span = float(np.median(seen))
     lo, hi = CLUSTER_SPAN_M
-    if not np.isfinite(span) or lo <= span <= hi:
+    if lo <= span <= hi:
         return
     field = "POINT:UNITS" if str(path).lower().endswith(".c3d") else "Units"
     cause = ("millimetre coordinates labelled as metres?" if span > hi else "metre coordinates labelled as millimetres?")

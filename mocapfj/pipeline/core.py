@@ -132,14 +132,14 @@ def run_simulate(scenario: str | Path, out: str | Path, duration_s: float | None
     from ..synth.record import record_scenario, write_scenario_bundle
     from ..synth.scenario import load_scenario
 
-    from ..synth.scenario import check_size
+    from ..synth.scenario import check_scenario
 
     scn = load_scenario(scenario)
     if duration_s is not None:
         if not duration_s > 0:
             raise InputError(None, "--duration", "a positive duration in s", duration_s)
         scn = scn.with_duration(duration_s)
-        check_size("--duration", scn)
+        check_scenario("--duration", scn)
     try:
         sr = record_scenario(scn, with_concealment=concealment)
     except InputError as e:

@@ -197,9 +197,11 @@ MAX_SAMPLES = 5e7
 MAX_CAMERAS = 64
 
 
-def check_size(path, scn: "Scenario") -> None:
-    """Bounds that keep a simulation within this machine's time and memory: rates, the number of
-    samples (duration x rate), cameras; InputError naming the key."""
+def check_scenario(path, scn: "Scenario") -> None:
+    """What the simulator needs of a parsed scenario: bounds that keep it within this machine's
+    time and memory (rates, duration x rate, cameras), integer seed and resolver bits in range,
+    three or more distinct link markers not shared with the parent, noises >= 0; InputError
+    naming the key."""
     m = scn.measurement
     for key in ("mocap_hz", "controller_hz"):
         v = getattr(m, key)
@@ -240,7 +242,7 @@ def load_scenario(path: str | os.PathLike[str]) -> Scenario:
     except (ValueError, TypeError) as e:          # a value the model elements cannot take
         raise InputError(path, "scenario", "values the simulator accepts",
                          str(e).splitlines()[0][:200] if str(e) else type(e).__name__) from None
-    check_size(path, scn)
+    check_scenario(path, scn)
     return scn
 
 
