@@ -231,7 +231,7 @@ def test_an_undeclared_10_ms_clock_offset_is_found_and_what_it_moves_is_flagged(
     assert r.returncode == 0, r.stderr
     (j,) = json.loads(r.stdout)["joints"]
     clk = j["clock_offset"]
-    assert clk["found"] and not clk["applied"] and abs(clk["offset_s"] - 0.010) < 5e-4
+    assert clk["found"] and not clk["applied"] and abs(clk["offset_s"] - 0.010) < min(5e-4, 3 * clk["sd_s"])
     assert not j["params"]["v"]["determined"] and not j["params"]["b"]["determined"]
     assert "clock offset" in j["params"]["v"]["reason"] and "--fit-clock-offset" in j["params"]["v"]["reason"]
     # applied on request: the offset's own uncertainty (about a millisecond) keeps the split open

@@ -162,7 +162,8 @@ def _output_error_joint(t, q, q_m, u, fs_hz, decimate, models, measured, control
              "friction_law": {"law": "tanh" if oe.friction_scale > 0 else "sign", "eps_rad_s": oe.friction_scale},
              "band_hz": oe.band_hz, "residual_sd": {"q_rad": oe.sigma_q, "u_Nm": oe.sigma_u}}
     if oe.clock is not None:
-        extra["clock_offset"] = {"offset_s": oe.clock["offset_s"], "sd_s": oe.clock["sd_s"], "chi2": oe.clock["chi2"],
+        extra["clock_offset"] = {"offset_s": oe.clock["offset_s"], "sd_s": oe.clock["sd_s"],
+                                 "sd_fit_s": oe.clock["sd_fit_s"], "chi2": oe.clock["chi2"],
                                  "found": oe.clock["found"], "applied": oe.clock["applied"],
                                  "moves": oe.clock["moves"], "per_ms": oe.clock.get("per_ms", {})}
     if oe.hysteresis is not None and hysteretic:
