@@ -46,11 +46,13 @@ class JointModel:
     coupling: dict = field(default_factory=dict)
 
     def single_joint(self, smoothing: float = 1e-3) -> SingleJoint:
-        """The dynamics model (friction smoothed with tanh(q'/smoothing) for the integrator)."""
+        """The dynamics model. A friction law with its own smoothing (a tanh law, eps > 0) keeps it;
+        an exact sign law is smoothed with tanh(q'/smoothing) for the integrator."""
+        own = float(getattr(self.friction, "smoothing", 0.0) or 0.0)
         dt = Drivetrain(transmission_error=self.transmission_error, balancer=self.position_torque,
                         torque_gain=self.torque_gain)
         return SingleJoint(I=self.I, J=self.J, spring=self.spring, mglx=self.mglx, mgly=self.mgly, b=self.b,
-                           friction=self.friction.with_smoothing(smoothing), drivetrain=dt, name=self.name)
+                           friction=self.friction.with_smoothing(own if own > 0 else smoothing), drivetrain=dt, name=self.name)
 
     def stiffness(self) -> float:
         """The spring's mean slope over +-10 mrad, N m / rad (its linear equivalent)."""
