@@ -223,10 +223,13 @@ def _cmd_discover(args) -> int:
             lines.append(f"  {e['name']} on {e['joint']} (p = {e['p_value']:.1e}, fit {e['fit_gain_pct']:+.2f} %): "
                          f"{e['explanation']}")
         for j in s["fit_before"]:
-            line = f"  {j}: fit {s['fit_before'][j]:.2f} % -> {s['fit_after'][j]:.2f} %"
+            f = s["fits"][j]["after"]
+            line = (f"  {j}: fit {s['fit_before'][j]:.2f} % -> {s['fit_after'][j]:.2f} % (noise floor {f['floor']:.2f} %, "
+                    f"below {f['band_hz']:.3g} Hz)")
             if s["validation"] and j in s["validation"]["fit_before"]:
                 v = s["validation"]
-                line += f"; validation {v['fit_before'][j]:.2f} % -> {v['fit_after'][j]:.2f} %"
+                line += (f"; validation {v['fit_before'][j]:.2f} % -> {v['fit_after'][j]:.2f} % "
+                         f"(floor {v['fits'][j]['after']['floor']:.2f} %)")
             lines.append(line)
         lines.append(f"  wrote {args.out}/discovery.json, model.toml, residuals.csv")
         return "\n".join(lines)

@@ -116,10 +116,16 @@ class OutputError:
     """An output-error simulation compared with a recording (one joint, mocap samples).
 
     t (T,) s; q_sim, delta_sim, u_sim: simulated link angle, deflection q_m - q and logged motor
-    torque (rad, rad, N m); r_delta, r_u: recorded minus simulated (the deflection's constant,
-    the link-angle zero the joints stage cannot know, removed); fit_delta, fit_u: fit % of each;
-    fit: the joint's fit %, 100 (1 - sqrt((e_delta^2 + e_u^2) / 2)) with e the normalised error
-    of each (the deflection shows what mocap sees, the torque what the drive sees).
+    torque (rad, rad, N m); r_delta, r_u: recorded minus simulated, full band (the deflection's
+    constant, the link-angle zero the joints stage cannot know, removed).
+
+    The comparison (:mod:`.compare`, docs/conventions.md): fit_delta, fit_u, fit: fit % of the
+    deflection, of the torque and of the joint, 100 (1 - sqrt((e_delta^2 + e_u^2) / 2)) with e the
+    normalised error of each, in the band the model claims (band_hz); floor_delta, floor_u, floor:
+    the same for a perfect model (the recording's noise in that band: noise_delta_rad, noise_u_Nm,
+    estimated by floor_method "periods" over the excitation's period_s or "white"), floor_sd,
+    floor_sd_delta, floor_sd_u the floors' SDs in points (NaN for a white floor);
+    fit_full_delta, fit_full_u: the fits at full rate, noise included.
     """
 
     t: np.ndarray
@@ -131,17 +137,76 @@ class OutputError:
     fit_delta: float
     fit_u: float
     fit: float
+    floor_delta: float = float("nan")
+    floor_u: float = float("nan")
+    floor: float = float("nan")
+    floor_sd: float = float("nan")
+    floor_sd_delta: float = float("nan")
+    floor_sd_u: float = float("nan")
+    band_hz: float = float("nan")
+    period_s: float | None = None
+    floor_method: str = ""
+    noise_delta_rad: float = float("nan")
+    noise_u_Nm: float = float("nan")
+    fit_full_delta: float = float("nan")
+    fit_full_u: float = float("nan")
+
+    def summary(self) -> dict:
+        """The comparison's numbers (discovery.json)."""
+        return {"fit": self.fit, "deflection": self.fit_delta, "torque": self.fit_u, "floor": self.floor,
+                "floor_deflection": self.floor_delta, "floor_torque": self.floor_u, "gap_to_floor": self.floor - self.fit,
+                "floor_sd": self.floor_sd, "floor_sd_deflection": self.floor_sd_delta, "floor_sd_torque": self.floor_sd_u,
+                "band_hz": self.band_hz, "period_s": self.period_s, "floor_method": self.floor_method,
+                "noise_deflection_rad": self.noise_delta_rad, "noise_torque_Nm": self.noise_u_Nm,
+                "deflection_full_band": self.fit_full_delta, "torque_full_band": self.fit_full_u}
+
+
+def _plain_link(model: JointModel, t, drive):
+    """(q_sim, u_sim) by the compiled link kernel (:func:`mocapfj.dynamics.link_response.link_response`,
+    exact in the Coulomb law, 100x faster than integrating the general model) when the model is
+    what it runs: Coulomb-viscous friction, a linear (no offset) or cubic spring, no drivetrain
+    term; None otherwise. The motor's velocity and acceleration are the cubic spline's of `drive`,
+    as the general path's."""
+    from scipy.interpolate import CubicSpline
+
+    from ..dynamics import CoulombViscous, CubicSpring, LinearSpring
+    from ..dynamics.link_response import link_response
+
+    fr, sp = model.friction, model.spring
+    if (type(fr) is not CoulombViscous or model.transmission_error is not None or model.position_torque is not None
+            or model.torque_gain != 1.0 or model.coupling):
+        return None
+    if type(sp) is LinearSpring and sp.offset == 0.0:
+        k, k3 = sp.k, 0.0
+    elif type(sp) is CubicSpring and sp.k3 >= 0.0:
+        k, k3 = sp.k1, sp.k3
+    else:
+        return None
+    if not (model.I > 0 and k > 0 and fr.c >= 0 and fr.v >= 0 and fr.smoothing >= 0):
+        return None
+    fs = 1.0 / float(np.median(np.diff(t)))
+    if np.abs(np.diff(t) * fs - 1.0).max() > 1e-6:
+        return None
+    spline = CubicSpline(t, drive)
+    qd, qdd = spline(t, 1), spline(t, 2)
+    q_sim, _ = link_response(drive, fs, I=model.I, mglx=model.mglx, mgly=model.mgly, c=fr.c, v=fr.v, k=k,
+                             eps=fr.smoothing, k3=k3, qd_m=qd)
+    u_sim = model.J * qdd + model.b * qd + sp.torque(drive - q_sim)
+    return q_sim, u_sim
 
 
 def simulate_joint(model: JointModel, t, q, q_m, u, others_qdd: dict | None = None, *, trim_s: float = 1.0,
-                   rtol: float = 1e-4, atol: float = 1e-7) -> OutputError:
+                   rtol: float = 1e-4, atol: float = 1e-7, period_s: float | None | str = "auto") -> OutputError:
     """Simulate `model` driven by the recorded motor angle and compare with the recording.
 
     t, q, q_m, u : (T,) on one clock (s, rad, rad, N m); others_qdd : {joint: (T,) rad/s^2} the
     other joints' link accelerations, for the model's coupling terms. The delay of the model
     shifts the simulated link angle onto the mocap samples. `trim_s` at both ends is left out
-    of the fits (the simulation starts from the static state).
+    of the fits (the simulation starts from the static state). period_s : the excitation's period
+    for the noise floor; "auto" finds it in q_m (:func:`.compare.excitation_period_s`), None: none.
     """
+    from .compare import combined_fit, combined_floor_sd, compare_channel, comparison_band_hz, excitation_period_s
+
     t, q, q_m, u = (np.asarray(a, dtype=np.float64) for a in (t, q, q_m, u))
     ext = None
     if model.coupling:
@@ -153,12 +218,20 @@ def simulate_joint(model: JointModel, t, q, q_m, u, others_qdd: dict | None = No
 
     def coupling_torque(tt):
         return np.interp(tt, t, ext) if np.ndim(tt) == 0 else np.interp(tt, t, ext)[:, None]
-    res = simulate(model.single_joint(), t, PrescribedMotor.from_samples(t, q_m),
-                   tau_ext=coupling_torque if ext is not None else None, rtol=rtol, atol=atol)
-    q_sim = res.q[:, 0]
+    from ..ident.output_error import wiener_drive
+
+    # the motor angle drives the link without the encoder noise that would ring it where the real
+    # link, driven by the true motion, does not (mocapfj.ident.output_error.wiener_drive)
+    drive = wiener_drive(q_m, 1.0 / float(np.median(np.diff(t))))
+    fast = _plain_link(model, t, drive) if ext is None else None
+    if fast is not None:
+        q_sim, u_sim = fast
+    else:
+        res = simulate(model.single_joint(), t, PrescribedMotor.from_samples(t, drive),
+                       tau_ext=coupling_torque if ext is not None else None, rtol=rtol, atol=atol)
+        q_sim, u_sim = res.q[:, 0], res.u[:, 0]
     if model.delay_s:
         q_sim = shift_signal(t, q_sim, -model.delay_s)        # mocap stamps are late: it saw q(t + delay)
-    u_sim = res.u[:, 0]
     d_rec, d_sim = q_m - q, q_m - q_sim
     keep = (t >= t[0] + trim_s) & (t <= t[-1] - trim_s) & np.isfinite(d_sim)
     r_d = np.full_like(t, np.nan)
@@ -169,6 +242,18 @@ def simulate_joint(model: JointModel, t, q, q_m, u, others_qdd: dict | None = No
     dc = d_rec[keep] - d_rec[keep].mean()
     e_d = np.linalg.norm(r_d[keep]) / np.linalg.norm(dc)
     e_u = np.linalg.norm(r_u[keep]) / np.linalg.norm(u[keep] - u[keep].mean())
+    # the comparison in the model's band, against the recording's noise floor
+    fs = 1.0 / float(np.median(np.diff(t)))
+    band = comparison_band_hz(model.stiffness(), model.I, fs)
+    inner = (t >= t[0] + trim_s) & (t <= t[-1] - trim_s)
+    if period_s == "auto":
+        period_s = excitation_period_s(q_m[inner], fs)
+    cd = compare_channel(d_rec, d_sim, q, fs, band, keep, period_s, center=True)
+    cu = compare_channel(u, u_sim, u, fs, band, keep, period_s, bounded=True)
     return OutputError(t=t, q_sim=q_sim, delta_sim=d_sim, u_sim=u_sim, r_delta=r_d, r_u=r_u,
-                       fit_delta=float(100 * (1 - e_d)), fit_u=float(100 * (1 - e_u)),
-                       fit=float(100 * (1 - np.sqrt((e_d**2 + e_u**2) / 2))))
+                       fit_delta=cd.fit, fit_u=cu.fit, fit=combined_fit(cd.e, cu.e),
+                       floor_delta=cd.floor, floor_u=cu.floor, floor=combined_fit(cd.e_floor, cu.e_floor),
+                       floor_sd=combined_floor_sd(cd, cu), floor_sd_delta=cd.floor_sd, floor_sd_u=cu.floor_sd,
+                       band_hz=band, period_s=period_s, floor_method=cd.method if cd.method == cu.method else
+                       f"{cd.method}/{cu.method}", noise_delta_rad=cd.noise_sd, noise_u_Nm=cu.noise_sd,
+                       fit_full_delta=float(100 * (1 - e_d)), fit_full_u=float(100 * (1 - e_u)))

@@ -1,0 +1,232 @@
+"""The comparison of a simulated joint with its recording, measured against the recording's own
+noise floor (docs/conventions.md, "Fit and noise floor").
+
+A recording carries noise a perfect model cannot predict: the markers' (in the deflection), the
+torque sensor's or current loop's, and the encoder's, which reaches the prediction because the
+simulated link is driven by the recorded motor angle and the torque model differentiates it
+twice. Compared at full rate, that noise decides the score (a torque fit of 20 % for the true
+model of a recording with 0.5 N m torque noise and 6e-5 rad encoder noise). So the comparison is
+made
+
+- in the band the model claims: a lumped flexible joint is a model of the motion up to a fraction
+  of its link's resonance (:data:`BAND_FRACTION` of sqrt(k / I) / 2 pi, at least
+  :data:`MIN_BAND_HZ`, at most 60 Hz and 0.4 x the sampling rate), both signals through the same
+  zero-phase low-pass;
+- against the noise floor: the fit a perfect model would reach on this recording, from the part
+  of the residual that does not repeat. An identification excitation is periodic (a Fourier series
+  or a multisine: Swevers, Ganseman, Tukel, de Schutter and Van Brussel 1997; Pintelon and
+  Schoukens 2012, ch. 2), and so is everything a deterministic model predicts for it once the
+  start has died out; what changes from period to period is noise. With P whole periods the
+  noise variance is half the mean square of the difference between consecutive periods (averaged
+  over the pairs, one above 4 x their median left out: a disturbed period such as a start ramp
+  does not decide it), estimated per channel on the
+  in-band residual itself, so it holds for coloured noise and for the encoder noise the
+  prediction carries. Without a period (|autocorrelation| of the motor angle below
+  :data:`MIN_PERIOD_CORR` at every lag between 0.5 s and half the recording) the floor is the
+  recorded signal's white floor (:func:`mocapfj.ident.conditioning.noise_floor_sd`) carried
+  into the band, which leaves coloured noise out: reported as ``floor_method = "white"``.
+
+The fit of a channel y with prediction y_hat is 100 (1 - ||y - y_hat|| / ||y - mean(y)||) (in
+band, inside the trims); its floor 100 (1 - sigma / SD(y)), sigma the in-band noise SD. The joint's
+fit and floor combine the deflection's and the torque's normalised errors e as
+100 (1 - sqrt((e_delta^2 + e_u^2) / 2)).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..ident.conditioning import lowpass, noise_gain
+
+__all__ = ["BAND_FRACTION", "MIN_BAND_HZ", "MIN_PERIOD_CORR", "comparison_band_hz", "excitation_period_s",
+           "Channel", "compare_channel", "combined_fit", "combined_floor_sd"]
+
+BAND_FRACTION = 0.6
+"""The comparison band's upper edge as a fraction of the link's resonance sqrt(k / I) / 2 pi: the
+identification's band (:data:`mocapfj.ident.output_error.LINK_BAND_FRACTION`)."""
+MIN_BAND_HZ = 1.0
+"""The band's edge is at least this (a link resonating below 1.7 Hz is still compared up to 1 Hz)."""
+MIN_PERIOD_CORR = 0.95
+"""The motor angle is periodic when its normalised autocorrelation reaches this at some lag."""
+
+
+def comparison_band_hz(k: float, I: float, fs_hz: float) -> float:
+    """The band the model claims, Hz (module docstring)."""
+    f_link = math.sqrt(max(k, 0.0) / I) / (2 * math.pi) if I > 0 else math.inf
+    return float(min(max(BAND_FRACTION * f_link, MIN_BAND_HZ), 60.0, 0.4 * fs_hz))
+
+
+def excitation_period_s(x: np.ndarray, fs_hz: float, min_s: float = 0.5) -> float | None:
+    """The period of a periodic excitation x (T,) (the motor angle), s, or None when x does not
+    repeat (module docstring). The lag of the highest normalised autocorrelation between `min_s`
+    and half the record (the shortest within 0.005 of it: the fundamental, not a multiple), refined
+    to a fraction of a sample by the least variance of the difference between x and x shifted by
+    it (scanned over +-2 % of the lag, then refined; one window for every shift, after the first
+    period when three or more remain)."""
+    from scipy.interpolate import CubicSpline
+    from scipy.optimize import minimize_scalar
+
+    x = np.asarray(x, dtype=np.float64)
+    n = x.size
+    if n < 8 or not np.isfinite(x).all():
+        return None
+    x = x - np.polyval(np.polyfit(np.arange(n), x, 1), np.arange(n))
+    F = np.fft.rfft(x, 2 * n)
+    ac = np.fft.irfft(np.abs(F) ** 2)[:n]
+    e = np.cumsum(x ** 2)
+    lags = np.arange(n)
+    head = e[n - 1 - lags]                              # sum of x[:n - L]^2
+    tail = e[-1] - np.concatenate([[0.0], e[:-1]])      # sum of x[L:]^2
+    with np.errstate(invalid="ignore", divide="ignore"):
+        rho = ac / np.sqrt(head * tail)
+    lo, hi = int(math.ceil(min_s * fs_hz)), n // 2
+    if hi <= lo + 2:
+        return None
+    seg = np.nan_to_num(rho[lo:hi], nan=-1.0)
+    peak = float(seg.max())
+    if peak < MIN_PERIOD_CORR:
+        return None
+    inner = (seg[1:-1] >= seg[:-2]) & (seg[1:-1] >= seg[2:]) & (seg[1:-1] >= peak - 0.005)
+    cand = np.flatnonzero(inner) + 1
+    L = lo + int(cand[0] if cand.size else np.argmax(seg))
+    t = np.arange(n) / fs_hz
+    spline = CubicSpline(t, x)
+    # one window for every trial shift; it skips the first period when three or more remain (the
+    # start ramp and the loop's settling repeat nothing)
+    # the autocorrelation's peak is broad for a slow motion: the lag is scanned over +-2 % first
+    reach = max(3, int(math.ceil(0.02 * L)))
+    skip = min(L, max(0, n - 2 * (L + reach))) / fs_hz
+    m = (t >= skip) & (t <= t[-1] - (L + reach) / fs_hz)
+
+    def mismatch(T):                                    # the variance: a drift's offset left out
+        return float(np.var(spline(t[m] + T) - x[m]))
+
+    scan = (L + np.linspace(-reach, reach, 41)) / fs_hz
+    i = int(np.argmin([mismatch(T) for T in scan]))
+    step = scan[1] - scan[0]
+    res = minimize_scalar(mismatch, bounds=(scan[i] - step, scan[i] + step), method="bounded",
+                          options={"xatol": 1e-6})
+    return float(res.x)
+
+
+@dataclass(frozen=True)
+class Channel:
+    """One channel's comparison in the band: fit %, floor % (the fit a perfect model would reach),
+    the in-band noise SD (the channel's unit), how it was estimated ("periods" or "white"), the
+    whole periods used, and the floor's own SD in points (periods: from the variance estimate's
+    degrees of freedom, 2 band x period per pair of periods; NaN for the white floor, which is an
+    upper bound of the floor when the noise is coloured)."""
+
+    fit: float
+    floor: float
+    noise_sd: float
+    method: str
+    n_periods: int
+    floor_sd: float = math.nan
+
+    @property
+    def e(self) -> float:
+        return 1.0 - self.fit / 100.0
+
+    @property
+    def e_floor(self) -> float:
+        return 1.0 - self.floor / 100.0
+
+
+def white_floor_sd(x: np.ndarray, fs_hz: float) -> float:
+    """SD of the white noise on a recorded signal x (T,): the median of its Welch spectrum (2 s
+    Hann windows) between 0.2 and 0.35 x fs, where a joint's motion has little power and a
+    resampler's anti-alias filter (at 0.4 x fs) has not yet cut."""
+    from scipy.signal import welch
+
+    nper = int(min(x.size, max(64, 2 * fs_hz)))
+    f, P = welch(x - np.mean(x), fs=fs_hz, nperseg=nper)
+    band = (f > 0.2 * fs_hz) & (f < 0.35 * fs_hz)
+    return float(np.sqrt(np.median(P[band]) * fs_hz / 2)) if band.any() else 0.0
+
+
+def _period_noise_var(r: np.ndarray, fs_hz: float, period_s: float) -> tuple[float, int]:
+    """(variance, pairs of periods used) of the part of r (n,) (uniform, no NaN) that differs
+    between consecutive periods: half the mean square of their difference, averaged over the pairs
+    of periods, leaving out a pair above 4 x their median."""
+    from scipy.interpolate import CubicSpline
+
+    n = r.size
+    span = (n - 1) / fs_hz
+    P = int(span // period_s)
+    if P < 2:
+        return math.nan, 0
+    t = np.arange(n) / fs_hz
+    start = span - P * period_s                              # the last P periods (the start is
+    M = int(period_s * fs_hz)                                # the one a ramp disturbs)
+    grid = start + np.arange(P)[:, None] * period_s + np.arange(M)[None, :] / fs_hz
+    R = CubicSpline(t, r)(np.minimum(grid, span))
+    v = 0.5 * np.mean(np.diff(R, axis=0) ** 2, axis=1)
+    if v.size >= 3:
+        v = v[v <= 4.0 * np.median(v)]          # a disturbed period out (a start ramp); marker
+    return float(np.mean(v)), v.size            # dropouts, unevenly spread, stay in
+
+
+def compare_channel(y: np.ndarray, y_hat: np.ndarray, raw: np.ndarray | None, fs_hz: float, band_hz: float,
+                    keep: np.ndarray, period_s: float | None, center: bool = False,
+                    bounded: bool = False) -> Channel:
+    """A channel's in-band fit and noise floor (module docstring).
+
+    y, y_hat : (T,) recorded and predicted (NaN allowed outside `keep`); raw : (T,) the recorded
+    signal whose white floor (:func:`white_floor_sd`) serves when there is no period, and bounds
+    the floor from below when there is one (None: only when there is no period); keep : (T,) bool,
+    the samples compared (a contiguous run); center : compare y - y_hat less its mean (a constant
+    the recording cannot fix); bounded : the white floor bounds the period estimate from below
+    (a logged torque: a drive's quantised current repeats with the motion).
+    """
+    idx = np.flatnonzero(keep)
+    sl = slice(int(idx[0]), int(idx[-1]) + 1)
+    yy, yh = y[sl], y_hat[sl]
+    ok = np.isfinite(yy) & np.isfinite(yh)
+    ar = np.arange(yy.size)
+    yy = np.interp(ar, ar[ok], yy[ok])
+    yh = np.interp(ar, ar[ok], yh[ok])
+    yb = lowpass(yy, fs_hz, band_hz)
+    rb = lowpass(yy - yh, fs_hz, band_hz)
+    edge = min(int(math.ceil(2.0 * fs_hz / band_hz)), yy.size // 4)   # the filter's own start and end
+    yb, rb = yb[edge:yy.size - edge], rb[edge:yy.size - edge]
+    if center:
+        rb = rb - rb.mean()
+    sd_y = float(np.std(yb))
+    fit = float(100.0 * (1.0 - math.sqrt(float(np.mean(rb ** 2))) / sd_y)) if sd_y > 0 else math.nan
+    white, pairs, method = 0.0, 0, "white"
+    v_per = math.nan
+    if period_s is not None:
+        v_per, pairs = _period_noise_var(rb, fs_hz, period_s)
+    if raw is not None and (bounded or not np.isfinite(v_per)):
+        x = np.asarray(raw, dtype=np.float64)
+        x = x[np.isfinite(x)]
+        white = white_floor_sd(x, fs_hz) ** 2 * noise_gain(fs_hz, band_hz) if x.size > 64 else 0.0
+    var = white
+    if np.isfinite(v_per) and v_per >= white:
+        var, method = v_per, "periods"
+    sd = math.sqrt(max(var, 0.0))
+    floor = float(100.0 * (1.0 - sd / sd_y)) if sd_y > 0 else math.nan
+    floor_sd = math.nan
+    if method == "periods":
+        dof = max(1.0, pairs * 2.0 * band_hz * period_s)
+        floor_sd = float(100.0 * sd / sd_y * math.sqrt(1.0 / (2.0 * dof)))
+    return Channel(fit=fit, floor=floor, noise_sd=sd, method=method, n_periods=int(pairs + 1 if pairs else 0),
+                   floor_sd=floor_sd)
+
+
+def combined_fit(e_delta: float, e_u: float) -> float:
+    """The joint's fit % from the two channels' normalised errors."""
+    return float(100.0 * (1.0 - math.sqrt((e_delta ** 2 + e_u ** 2) / 2.0)))
+
+
+def combined_floor_sd(d: Channel, u: Channel) -> float:
+    """The SD (points) of the joint's floor from its channels' (first order)."""
+    e = math.sqrt((d.e_floor ** 2 + u.e_floor ** 2) / 2.0)
+    if not e > 0 or (math.isnan(d.floor_sd) and math.isnan(u.floor_sd)):
+        return math.nan
+    # a white floor's channel counts with no SD of its own (its bias is not a scatter)
+    return float(math.hypot(d.e_floor * np.nan_to_num(d.floor_sd), u.e_floor * np.nan_to_num(u.floor_sd)) / (2.0 * e))

@@ -1,0 +1,91 @@
+"""Discovery's comparison (mocapfj.discover.compare): the excitation's period, the in-band noise
+floor against analytic noise, and the true model of an independent simulator's recording scoring
+at its floor."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from scipy.signal import lfilter
+
+import mocapfj
+from mocapfj.discover.compare import compare_channel, excitation_period_s
+from mocapfj.discover.model import simulate_joint
+from mocapfj.dynamics import CoulombViscous, JointModel, LinearSpring
+from mocapfj.ident.conditioning import lowpass, noise_gain
+from mocapfj.synth.hinge import simulate_hinge, small_grid
+
+FS = 200.0
+
+
+def _fourier(t, f0=0.13, n=5, seed=0):
+    rng = np.random.default_rng(seed)
+    a, ph = rng.uniform(0.3, 1.0, n), rng.uniform(0, 2 * np.pi, n)
+    return sum(a[i] / (i + 1) * np.sin(2 * np.pi * (i + 1) * f0 * t + ph[i]) for i in range(n))
+
+
+def test_period_of_a_fourier_excitation_and_none_for_a_random_one():
+    t = np.arange(0, 40.0, 1 / FS)
+    rng = np.random.default_rng(1)
+    x = _fourier(t) + 0.01 * rng.normal(size=t.size)
+    assert excitation_period_s(x, FS) == pytest.approx(1 / 0.13, rel=1e-4)
+    walk = np.cumsum(rng.normal(size=t.size)) / FS
+    assert excitation_period_s(walk, FS) is None
+
+
+@pytest.mark.parametrize("kind", ["white", "coloured"])
+def test_floor_is_the_in_band_noise_and_the_true_prediction_scores_at_it(kind):
+    """y = a periodic signal + noise; predicted by the periodic signal itself the fit is the floor,
+    and the floor's noise SD is the noise's in-band SD: sigma sqrt(gain) for white noise, and for
+    AR(1) noise (correlation 20 ms, its power where the motion is) the SD measured on the noise
+    itself, which the white floor would miss by a factor of 3."""
+    t = np.arange(0, 60.0, 1 / FS)
+    y0 = _fourier(t, f0=0.2)
+    rng = np.random.default_rng(2)
+    e = rng.normal(size=t.size)
+    if kind == "coloured":
+        a = math.exp(-1 / (0.02 * FS))
+        e = lfilter([math.sqrt(1 - a * a)], [1, -a], e)
+    noise = 0.02 * e
+    y, keep, band = y0 + noise, np.ones(t.size, bool), 5.0
+    ch = compare_channel(y, y0, None, FS, band, keep, 5.0)
+    assert ch.method == "periods" and ch.n_periods >= 11
+    inband = float(np.std(lowpass(noise, FS, band)[200:-200]))
+    assert ch.noise_sd == pytest.approx(inband, rel=0.08)
+    if kind == "white":
+        assert ch.noise_sd == pytest.approx(0.02 * math.sqrt(noise_gain(FS, band)), rel=0.08)
+    assert abs(ch.fit - ch.floor) < 0.3
+    # a prediction 5 % off adds an error orthogonal to the noise: e^2 = e_floor^2 + a^2 with
+    # a = 0.05 SD(y0) / SD(y) in band
+    off = compare_channel(y, 0.95 * y0, None, FS, band, keep, 5.0)
+    assert off.floor == pytest.approx(ch.floor, abs=0.05)
+    a = 0.05 * np.std(lowpass(y0, FS, band)) / np.std(lowpass(y, FS, band))
+    e_f = 1 - ch.floor / 100
+    assert ch.floor - off.fit == pytest.approx(100 * (math.sqrt(e_f ** 2 + a ** 2) - e_f), abs=0.3)
+
+
+def test_true_model_of_an_independent_simulator_scores_at_its_floor():
+    """A cobot joint of the hinge grid (PD-controlled simulation with coloured torque noise and a
+    tanh friction law, 0.5 mm-class markers: its full-rate deflection fit is far below 50 %) with
+    its true parameters as the model: in band, within two of the floor's SDs of the noise floor; an
+    inertia 30 % off falls well below it."""
+    case = small_grid(5)[1]
+    rec, truth = simulate_hinge(case)
+    s = mocapfj.signals(rec)["j1"]
+    m = JointModel(name="j1", gear_ratio=case.gear_ratio, I=case.I, J=case.J, mglx=case.mglx, mgly=case.mgly, b=case.b,
+                   friction=CoulombViscous(c=case.c, v=case.v, smoothing=case.eps_rad_s), spring=LinearSpring(k=case.k))
+    oe = simulate_joint(m, s.t, s.q, s.q_m, s.u)
+    assert oe.period_s == pytest.approx(1 / case.f0_hz, rel=1e-3)
+    # 28 s, three periods: the floor is known to about a point (its SD), and the fit is within
+    # two of those of it
+    assert 0.2 < oe.floor_sd < 2.0
+    assert abs(oe.floor - oe.fit) < 2 * oe.floor_sd, oe.summary()
+    assert oe.fit > oe.fit_full_delta            # the full-rate comparison measures the markers
+    # an inertia 30 % off: the torque (floor known to 0.1 point) falls 15 points below its floor,
+    # which the noisy deflection dilutes to 4 in the joint's fit
+    assert abs(oe.floor_u - oe.fit_u) < max(0.5, 2 * oe.floor_sd_u)
+    wrong = simulate_joint(m.with_(I=1.3 * case.I), s.t, s.q, s.q_m, s.u)
+    assert wrong.floor_u - wrong.fit_u > 10.0, wrong.summary()
+    assert wrong.floor - wrong.fit > 2.0 + (oe.floor - oe.fit)
