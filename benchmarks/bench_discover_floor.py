@@ -48,14 +48,14 @@ def true_model(truth: dict):
 
 
 def _off(m, name: str, factor: float):
+    """m with one parameter scaled."""
+    from mocapfj.dynamics import LinearSpring
+
     if name == "k":
         return m.with_(spring=LinearSpring(k=m.spring.k * factor))
     if name == "c":
         return m.with_(friction=replace(m.friction, c=m.friction.c * factor))
     return m.with_(**{name: getattr(m, name) * factor})
-
-
-from mocapfj.dynamics import LinearSpring  # noqa: E402
 
 
 def run_case(d: Path) -> dict:

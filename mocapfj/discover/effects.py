@@ -92,6 +92,8 @@ def hysteresis(fam: Families, mask, others) -> Candidate | None:
     beta, gamma = (float(v) for v in np.exp(x))
     kt = k + d_lin + k_h
     alpha = (k + d_lin) / kt
+    if not 0.0 <= alpha <= 1.0:           # the loop's share of the stiffness beyond the spring's
+        return None
     contribution = np.column_stack(cols(x)) @ c
     half_width = 1.0 / (beta + gamma)
     params = {"k": kt, "alpha": alpha, "beta": beta, "gamma": gamma, "loop_half_height_Nm": k_h * half_width}

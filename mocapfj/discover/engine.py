@@ -32,8 +32,11 @@ from .effects import EFFECTS, FITTERS, SPRING_EFFECTS, Candidate
 from .model import simulate_joint
 from .residuals import Families, families
 
-__all__ = ["Discovery", "discover", "locate", "effective_n", "GAP_POINTS"]
+__all__ = ["Discovery", "discover", "locate", "effective_n", "GAP_POINTS", "GAIN_MIN_POINTS"]
 
+GAIN_MIN_POINTS = 0.0
+"""An effect must raise the held-out output-error fit (the validation recording's, else the trial's)
+by more than this to be named."""
 GAP_POINTS = 1.0
 """A model whose in-band fit of the deflection or of the torque stays more than this many points
 (or two SDs of that floor, when those are more) below the recording's noise floor leaves a
@@ -50,7 +53,8 @@ class Discovery:
     (joint -> {t, before/after deflection and torque residuals} for the report), `stopped` (why
     the search ended: white residuals, nothing significant left, or the effect limit),
     `remaining` (joint -> the residuals left against their noise floors, and whether a mismatch
-    the library does not explain remains)."""
+    the library does not explain remains), `rejected` (effects the search found but did not keep:
+    a non-physical fit, or no gain on the held-out recording; each with its reason)."""
 
     effects: list
     models: dict
@@ -65,6 +69,7 @@ class Discovery:
     remaining: dict = field(default_factory=dict)
     recording: str = ""
     model_source: str = ""
+    rejected: list = field(default_factory=list)
 
     @property
     def verdict(self) -> str:
@@ -87,7 +92,7 @@ class Discovery:
         return {"recording": self.recording, "model": self.model_source, "effects": self.effects,
                 "fit_before": self.fit_before, "fit_after": self.fit_after, "fits": self.fits,
                 "location": self.location, "validation": self.validation, "stopped": self.stopped,
-                "remaining": self.remaining, "verdict": self.verdict}
+                "remaining": self.remaining, "rejected": self.rejected, "verdict": self.verdict}
 
 
 def effective_n(r: np.ndarray) -> float:
@@ -235,8 +240,9 @@ def _families_all(models, signals, fs_hz):
     return fams, qdd
 
 
-def _search(fams, qdd, names, tried, holdout):
-    """Fit every effect on every joint on the first part of the trial, score it on the rest."""
+def _search(fams, qdd, names, tried, holdout, skip=frozenset()):
+    """Fit every effect on every joint on the first part of the trial, score it on the rest
+    (`skip`: (joint, effect) pairs not to try)."""
     results = []
     for jn in names:
         fam = fams[jn]
@@ -244,6 +250,8 @@ def _search(fams, qdd, names, tried, holdout):
         train = np.zeros(T, bool)
         train[: int(T * (1 - holdout))] = True
         for eff in tried:
+            if (jn, eff) in skip:
+                continue
             family = "spring" if eff in SPRING_EFFECTS else "link"
             cand = FITTERS[eff](fam, train & _residual_of(fam, family)[1], {k: v for k, v in qdd.items() if k != jn})
             if cand is None:
@@ -285,7 +293,8 @@ def _prove(model, found: list, s: JointSignals, others: dict):
     prev, gains = before, []
     for f in found:
         model = f["candidate"].apply(model)
-        cur = simulate_joint(model, s.t, s.q, s.q_m, s.u, others)
+        # in the nominal model's band: fits in different bands are not comparable
+        cur = simulate_joint(model, s.t, s.q, s.q_m, s.u, others, band_hz=before.band_hz)
         gains.append((f, cur.fit - prev.fit))
         prev = cur
     return before, prev, gains
@@ -314,15 +323,34 @@ def discover(signals: dict, models: dict, *, fs_hz: float, validation: dict | No
     names = list(signals)
     fams, qdd = _families_all(current, signals, fs_hz)
     location = {n: locate(fams[n]) for n in names}
-    found = []
+    found, rejected, banned = [], [], set()
+    # the other joints' accelerations on the validation recording, for coupling terms: the motor's
+    # (the links follow them)
+    vq = ({jn: lowpass(derivatives(lowpass(v.q_m, fs_hz, 20.0), fs_hz)[1], fs_hz, 20.0) for jn, v in validation.items()}
+          if validation is not None else None)
+    held = {}
+
+    def held_out(jn):
+        """[signals, others' accelerations, band, current model's fit, name] of the held-out
+        evidence for joint jn: the validation recording, else the trial."""
+        if jn not in held:
+            on_valid = validation is not None and jn in validation
+            data = validation[jn] if on_valid else signals[jn]
+            others = {k: v for k, v in (vq if on_valid else qdd).items() if k != jn}
+            oe = simulate_joint(current[jn], data.t, data.q, data.q_m, data.u, others)
+            held[jn] = [data, others, oe.band_hz, oe.fit, "validation recording" if on_valid else "trial"]
+        return held[jn]
+
     stop = f"{max_effects} effects found (the most searched for)"
-    for _ in range(max_effects):
+    for _ in range(max_effects + len(effects)):
+        if len(found) >= max_effects:
+            break
         if all(_ljung_box(f.r_s[f.keep_s], fs_hz) > 0.01 and _ljung_box(f.r_l[f.keep_l], fs_hz) > 0.01
                for f in fams.values()):
             stop = "the residuals are white"
             break
         tried = [e for e in effects if not any(f["name"] == e for f in found)]
-        results = _search(fams, qdd, names, tried, holdout)
+        results = _search(fams, qdd, names, tried, holdout, skip=banned)
         if not results:
             stop = "no effect of the library applies"
             break
@@ -336,13 +364,46 @@ def discover(signals: dict, models: dict, *, fs_hz: float, validation: dict | No
         # refit on the whole trial, augment, recompute the residuals
         fam = fams[jn]
         full = FITTERS[cand.name](fam, _residual_of(fam, cand.family)[1], {k: v for k, v in qdd.items() if k != jn})
-        cand = full if full is not None else cand
-        current[jn] = cand.apply(current[jn])
+        augmented = None
+        for c in ((full, cand) if full is not None else (cand,)):
+            try:
+                augmented = c.apply(current[jn])
+            except InputError as e:
+                # a fit outside the element's physics (a hysteretic share above 1, a negative
+                # stiffness): a finding about the model, not a crash; the effect is not tried again
+                reason = (f"its fit is not physical ({e.field} = {e.got}, expected {e.expected}): the residual it "
+                          "followed is left as found")
+                continue
+            cand = c
+            break
+        if augmented is None:
+            banned.add((jn, cand.name))
+            rejected.append({"name": cand.name, "joint": jn, "parameters": cand.params, "reason": reason})
+            continue
+        if simulate:
+            # named only if it also improves the held-out output-error fit (the validation
+            # recording's): an equation-error gain can be the model compensating its own misfit
+            data, others, band, fit0, where = held_out(jn)
+            try:
+                fit1 = simulate_joint(augmented, data.t, data.q, data.q_m, data.u, others, band_hz=band).fit
+                why = (f"it changes the {where}'s output-error fit by {fit1 - fit0:+.2f} points: an equation-error "
+                       "gain without a simulated one (the model compensating its own misfit, or an effect the "
+                       "held-out recording does not excite)")
+            except (InputError, RuntimeError) as e:     # e.g. a spring with no static equilibrium
+                fit1, why = -np.inf, f"the model with it cannot be simulated ({e})"
+            if not fit1 - fit0 > GAIN_MIN_POINTS:
+                banned.add((jn, cand.name))
+                rejected.append({"name": cand.name, "joint": jn, "parameters": cand.params, "reason": why})
+                continue
+            held[jn][3] = fit1
+        current[jn] = augmented
         found.append({"name": cand.name, "joint": jn, "candidate": cand, "score": score,
                       "p_value": min(1.0, score["p_value"] * n_tests),
                       "runner_up": sorted(((c.name, s["explained_Nm"]) for j, c, s in results if j == jn and c.name != cand.name),
                                           key=lambda x: -x[1])[:3]})
         fams, qdd = _families_all(current, signals, fs_hz)
+    else:
+        stop = "every further significant effect was rejected (see rejected)"
     effects_out, fit_before, fit_after, fits, residuals = [], {}, {}, {}, {}
     val = None
     if simulate:
@@ -357,9 +418,6 @@ def discover(signals: dict, models: dict, *, fs_hz: float, validation: dict | No
                              "r_delta_after": after.r_delta, "r_u_after": after.r_u}
         if validation is not None:
             val = {"effects": [], "fit_before": {}, "fit_after": {}, "fits": {}}
-            # the other joints' accelerations for coupling terms: the motor's (the links follow them)
-            vq = {jn: lowpass(derivatives(lowpass(v.q_m, fs_hz, 20.0), fs_hz)[1], fs_hz, 20.0)
-                  for jn, v in validation.items()}
             for jn in names:
                 if jn not in validation:
                     continue
@@ -386,4 +444,4 @@ def discover(signals: dict, models: dict, *, fs_hz: float, validation: dict | No
         remaining[jn]["unexplained"] = bool(remaining[jn]["unexplained"] or over)
     return Discovery(effects=effects_out, models=current, nominal=nominal, fit_before=fit_before, fit_after=fit_after,
                      fits=fits, location=location, validation=val, residuals=residuals, stopped=stop,
-                     remaining=remaining)
+                     remaining=remaining, rejected=rejected)

@@ -196,7 +196,8 @@ def _plain_link(model: JointModel, t, drive):
 
 
 def simulate_joint(model: JointModel, t, q, q_m, u, others_qdd: dict | None = None, *, trim_s: float = 1.0,
-                   rtol: float = 1e-4, atol: float = 1e-7, period_s: float | None | str = "auto") -> OutputError:
+                   rtol: float = 1e-4, atol: float = 1e-7, period_s: float | None | str = "auto",
+                   band_hz: float | None = None) -> OutputError:
     """Simulate `model` driven by the recorded motor angle and compare with the recording.
 
     t, q, q_m, u : (T,) on one clock (s, rad, rad, N m); others_qdd : {joint: (T,) rad/s^2} the
@@ -204,6 +205,8 @@ def simulate_joint(model: JointModel, t, q, q_m, u, others_qdd: dict | None = No
     shifts the simulated link angle onto the mocap samples. `trim_s` at both ends is left out
     of the fits (the simulation starts from the static state). period_s : the excitation's period
     for the noise floor; "auto" finds it in q_m (:func:`.compare.excitation_period_s`), None: none.
+    band_hz : the comparison band; default the model's own (:func:`.compare.comparison_band_hz` at
+    the deflections it simulates). Models compared with each other take one band.
     """
     from .compare import combined_fit, combined_floor_sd, compare_channel, comparison_band_hz, excitation_period_s
 
@@ -244,7 +247,13 @@ def simulate_joint(model: JointModel, t, q, q_m, u, others_qdd: dict | None = No
     e_u = np.linalg.norm(r_u[keep]) / np.linalg.norm(u[keep] - u[keep].mean())
     # the comparison in the model's band, against the recording's noise floor
     fs = 1.0 / float(np.median(np.diff(t)))
-    band = comparison_band_hz(model.stiffness(), model.I, fs)
+    # the link's resonance at the deflections the model itself goes through (a stiffening spring's
+    # slope over +-10 mrad can be 100x its slope over the 0.2 mrad a light joint deflects)
+    if band_hz is None:
+        lo, hi = np.nanpercentile(d_sim[keep], [1.0, 99.0]) if keep.any() else (-0.01, 0.01)
+        band = comparison_band_hz(model.stiffness(lo, hi) if hi - lo > 1e-7 else model.stiffness(), model.I, fs)
+    else:
+        band = float(band_hz)
     inner = (t >= t[0] + trim_s) & (t <= t[-1] - trim_s)
     if period_s == "auto":
         period_s = excitation_period_s(q_m[inner], fs)

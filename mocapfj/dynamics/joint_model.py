@@ -54,9 +54,10 @@ class JointModel:
         return SingleJoint(I=self.I, J=self.J, spring=self.spring, mglx=self.mglx, mgly=self.mgly, b=self.b,
                            friction=self.friction.with_smoothing(own if own > 0 else smoothing), drivetrain=dt, name=self.name)
 
-    def stiffness(self) -> float:
-        """The spring's mean slope over +-10 mrad, N m / rad (its linear equivalent)."""
-        d = np.linspace(-0.01, 0.01, 201)
+    def stiffness(self, lo: float = -0.01, hi: float = 0.01) -> float:
+        """The spring's mean slope over deflections lo..hi (default +-10 mrad), N m / rad (its
+        linear equivalent there)."""
+        d = np.linspace(lo, hi, 201)
         tau = np.asarray(self.spring.run(d, np.arange(d.size) * 1e-3)
                          if hasattr(self.spring, "run") and getattr(self.spring, "n_states", 0) else self.spring.torque(d))
         return float(np.polyfit(d, tau, 1)[0])

@@ -89,3 +89,44 @@ def test_true_model_of_an_independent_simulator_scores_at_its_floor():
     wrong = simulate_joint(m.with_(I=1.3 * case.I), s.t, s.q, s.q_m, s.u)
     assert wrong.floor_u - wrong.fit_u > 10.0, wrong.summary()
     assert wrong.floor - wrong.fit > 2.0 + (oe.floor - oe.fit)
+
+
+@pytest.fixture(scope="module")
+def pa10_control():
+    """A PA-10 joint of the hinge grid (20-30 s, sign friction, white torque noise) and its true model."""
+    case = small_grid(6)[0]
+    rec, _ = simulate_hinge(case)
+    s = mocapfj.signals(rec)
+    m = JointModel(name="j1", gear_ratio=case.gear_ratio, I=case.I, J=case.J, mglx=case.mglx, mgly=case.mgly, b=case.b,
+                   friction=CoulombViscous(c=case.c, v=case.v, smoothing=case.eps_rad_s), spring=LinearSpring(k=case.k))
+    return s, m
+
+
+def _fake(apply):
+    """A drive_gain fitter that claims 90 % of the spring residual and augments the model by `apply`."""
+    from mocapfj.discover.effects import Candidate
+
+    def fit(fam, mask, others):
+        return Candidate("drive_gain", "spring", {"gain": 1.3}, 1, 0.9 * fam.r_s, apply, {}, lambda g: "fake")
+    return fit
+
+
+@pytest.mark.parametrize("how", ["worse", "non_physical"])
+def test_an_equation_error_gain_the_simulation_does_not_confirm_is_rejected(pa10_control, monkeypatch, how):
+    """A control recording against its true model with the stiffness 10 % low (a structured
+    spring residual), and an 'effect' that explains 90 % of that residual in equation error but
+    makes the model worse (a 30 % drive gain), or whose parameters the element refuses: discovery
+    names nothing, reports it under `rejected` with the reason, does not crash, and says that a
+    mismatch remains."""
+    from mocapfj.discover import discover, engine
+    from mocapfj.dynamics import BoucWen
+
+    s, m = pa10_control
+    apply = (lambda j: j.with_(torque_gain=1.3)) if how == "worse" else (lambda j: j.with_(spring=BoucWen(k=j.spring.k, alpha=-1.0, beta=1.0, gamma=1.0)))
+    monkeypatch.setitem(engine.FITTERS, "drive_gain", _fake(apply))
+    off = m.with_(spring=LinearSpring(k=0.9 * m.spring.k))
+    d = discover(s, {"j1": off}, fs_hz=s["j1"].fs_hz, effects=("drive_gain",), min_explained=0.0)
+    assert d.effects == [] and "mismatch" in d.verdict
+    (r,) = d.rejected
+    assert r["name"] == "drive_gain"
+    assert ("trial's output-error fit by -" in r["reason"]) if how == "worse" else ("not physical" in r["reason"])
