@@ -23,8 +23,10 @@ made
   in-band residual itself, so it holds for coloured noise and for the encoder noise the
   prediction carries. Without a period (|autocorrelation| of the motor angle below
   :data:`MIN_PERIOD_CORR` at every lag between 0.5 s and half the recording) the floor is the
-  recorded signal's white floor (:func:`mocapfj.ident.conditioning.noise_floor_sd`) carried
-  into the band, which leaves coloured noise out: reported as ``floor_method = "white"``.
+  recorded signal's white floor (:func:`white_floor_sd`) carried into the band, which leaves
+  coloured noise out: reported as ``floor_method = "white"``. For the logged torque the white
+  floor also bounds the period estimate from below (a drive's quantised current repeats with the
+  motion, so the period differences miss it).
 
 The fit of a channel y with prediction y_hat is 100 (1 - ||y - y_hat|| / ||y - mean(y)||) (in
 band, inside the trims); its floor 100 (1 - sigma / SD(y)), sigma the in-band noise SD. The joint's
@@ -42,7 +44,7 @@ import numpy as np
 from ..ident.conditioning import lowpass, noise_gain
 
 __all__ = ["BAND_FRACTION", "MIN_BAND_HZ", "MIN_PERIOD_CORR", "comparison_band_hz", "excitation_period_s",
-           "Channel", "compare_channel", "combined_fit", "combined_floor_sd"]
+           "Channel", "compare_channel", "combined_fit", "combined_floor_sd", "white_floor_sd"]
 
 BAND_FRACTION = 0.6
 """The comparison band's upper edge as a fraction of the link's resonance sqrt(k / I) / 2 pi: the
@@ -94,9 +96,9 @@ def excitation_period_s(x: np.ndarray, fs_hz: float, min_s: float = 0.5) -> floa
     L = lo + int(cand[0] if cand.size else np.argmax(seg))
     t = np.arange(n) / fs_hz
     spline = CubicSpline(t, x)
-    # one window for every trial shift; it skips the first period when three or more remain (the
+    # the autocorrelation's peak is broad for a slow motion: the lag is scanned over +-2 % first;
+    # one window for every trial shift, after the first period when three or more remain (the
     # start ramp and the loop's settling repeat nothing)
-    # the autocorrelation's peak is broad for a slow motion: the lag is scanned over +-2 % first
     reach = max(3, int(math.ceil(0.02 * L)))
     skip = min(L, max(0, n - 2 * (L + reach))) / fs_hz
     m = (t >= skip) & (t <= t[-1] - (L + reach) / fs_hz)
@@ -116,7 +118,7 @@ def excitation_period_s(x: np.ndarray, fs_hz: float, min_s: float = 0.5) -> floa
 class Channel:
     """One channel's comparison in the band: fit %, floor % (the fit a perfect model would reach),
     the in-band noise SD (the channel's unit), how it was estimated ("periods" or "white"), the
-    whole periods used, and the floor's own SD in points (periods: from the variance estimate's
+    pairs of consecutive periods used, and the floor's own SD in points (periods: from the variance estimate's
     degrees of freedom, 2 band x period per pair of periods; NaN for the white floor, which is an
     upper bound of the floor when the noise is coloured)."""
 
@@ -124,7 +126,7 @@ class Channel:
     floor: float
     noise_sd: float
     method: str
-    n_periods: int
+    n_pairs: int
     floor_sd: float = math.nan
 
     @property
@@ -214,7 +216,7 @@ def compare_channel(y: np.ndarray, y_hat: np.ndarray, raw: np.ndarray | None, fs
     if method == "periods":
         dof = max(1.0, pairs * 2.0 * band_hz * period_s)
         floor_sd = float(100.0 * sd / sd_y * math.sqrt(1.0 / (2.0 * dof)))
-    return Channel(fit=fit, floor=floor, noise_sd=sd, method=method, n_periods=int(pairs + 1 if pairs else 0),
+    return Channel(fit=fit, floor=floor, noise_sd=sd, method=method, n_pairs=int(pairs) if method == "periods" else 0,
                    floor_sd=floor_sd)
 
 

@@ -51,7 +51,8 @@ class Discovery:
     (joint -> fit %), `fits` (joint -> {before, after} details), `location` (joint -> residual
     statistics), `validation` (same keys on the validation recording, or None), `residuals`
     (joint -> {t, before/after deflection and torque residuals} for the report), `stopped` (why
-    the search ended: white residuals, nothing significant left, or the effect limit),
+    the search ended: white residuals, nothing significant left, every further significant effect
+    rejected, or the effect limit),
     `remaining` (joint -> the residuals left against their noise floors, and whether a mismatch
     the library does not explain remains), `rejected` (effects the search found but did not keep:
     a non-physical fit, or no gain on the held-out recording; each with its reason)."""

@@ -208,9 +208,11 @@ def simulate_joint(model: JointModel, t, q, q_m, u, others_qdd: dict | None = No
     band_hz : the comparison band; default the model's own (:func:`.compare.comparison_band_hz` at
     the deflections it simulates). Models compared with each other take one band.
     """
+    from ..ident.output_error import wiener_drive
     from .compare import combined_fit, combined_floor_sd, compare_channel, comparison_band_hz, excitation_period_s
 
     t, q, q_m, u = (np.asarray(a, dtype=np.float64) for a in (t, q, q_m, u))
+    fs = 1.0 / float(np.median(np.diff(t)))
     ext = None
     if model.coupling:
         others_qdd = others_qdd or {}
@@ -221,11 +223,10 @@ def simulate_joint(model: JointModel, t, q, q_m, u, others_qdd: dict | None = No
 
     def coupling_torque(tt):
         return np.interp(tt, t, ext) if np.ndim(tt) == 0 else np.interp(tt, t, ext)[:, None]
-    from ..ident.output_error import wiener_drive
 
     # the motor angle drives the link without the encoder noise that would ring it where the real
     # link, driven by the true motion, does not (mocapfj.ident.output_error.wiener_drive)
-    drive = wiener_drive(q_m, 1.0 / float(np.median(np.diff(t))))
+    drive = wiener_drive(q_m, fs)
     fast = _plain_link(model, t, drive) if ext is None else None
     if fast is not None:
         q_sim, u_sim = fast
@@ -245,9 +246,8 @@ def simulate_joint(model: JointModel, t, q, q_m, u, others_qdd: dict | None = No
     dc = d_rec[keep] - d_rec[keep].mean()
     e_d = np.linalg.norm(r_d[keep]) / np.linalg.norm(dc)
     e_u = np.linalg.norm(r_u[keep]) / np.linalg.norm(u[keep] - u[keep].mean())
-    # the comparison in the model's band, against the recording's noise floor
-    fs = 1.0 / float(np.median(np.diff(t)))
-    # the link's resonance at the deflections the model itself goes through (a stiffening spring's
+    # the comparison in the model's band, against the recording's noise floor; the band from the
+    # link's resonance at the deflections the model itself goes through (a stiffening spring's
     # slope over +-10 mrad can be 100x its slope over the 0.2 mrad a light joint deflects)
     if band_hz is None:
         lo, hi = np.nanpercentile(d_sim[keep], [1.0, 99.0]) if keep.any() else (-0.01, 0.01)

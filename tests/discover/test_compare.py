@@ -51,7 +51,7 @@ def test_floor_is_the_in_band_noise_and_the_true_prediction_scores_at_it(kind):
     noise = 0.02 * e
     y, keep, band = y0 + noise, np.ones(t.size, bool), 5.0
     ch = compare_channel(y, y0, None, FS, band, keep, 5.0)
-    assert ch.method == "periods" and ch.n_periods >= 11
+    assert ch.method == "periods" and ch.n_pairs >= 10
     inband = float(np.std(lowpass(noise, FS, band)[200:-200]))
     assert ch.noise_sd == pytest.approx(inband, rel=0.08)
     if kind == "white":
