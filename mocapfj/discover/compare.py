@@ -23,7 +23,7 @@ made
   in-band residual itself, so it holds for coloured noise and for the encoder noise the
   prediction carries. Without a period (|autocorrelation| of the motor angle below
   :data:`MIN_PERIOD_CORR` at every lag between 0.5 s and half the recording) the floor is the
-  recorded signal's white floor (:func:`white_floor_sd`) carried into the band, which leaves
+  recorded signal's white floor (the median of its spectrum over :data:`WHITE_BAND`) carried into the band, which leaves
   coloured noise out: reported as ``floor_method = "white"``. For the logged torque the white
   floor also bounds the period estimate from below (a drive's quantised current repeats with the
   motion, so the period differences miss it).
@@ -41,16 +41,20 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..ident.conditioning import lowpass, noise_gain
+from ..ident.conditioning import lowpass, noise_floor_sd, noise_gain
 
 __all__ = ["BAND_FRACTION", "MIN_BAND_HZ", "MIN_PERIOD_CORR", "comparison_band_hz", "excitation_period_s",
-           "Channel", "compare_channel", "combined_fit", "combined_floor_sd", "white_floor_sd"]
+           "Channel", "compare_channel", "combined_fit", "combined_floor_sd", "WHITE_BAND"]
 
 BAND_FRACTION = 0.6
 """The comparison band's upper edge as a fraction of the link's resonance sqrt(k / I) / 2 pi: the
 identification's band (:data:`mocapfj.ident.output_error.LINK_BAND_FRACTION`)."""
 MIN_BAND_HZ = 1.0
 """The band's edge is at least this (a link resonating below 1.7 Hz is still compared up to 1 Hz)."""
+WHITE_BAND = (0.2, 0.35)
+"""The share of the sampling rate the white floor is read in (:func:`mocapfj.ident.conditioning.noise_floor_sd`):
+where a joint's motion has little power and a resampler's anti-alias filter (at 0.4 x fs) has not
+yet cut."""
 MIN_PERIOD_CORR = 0.95
 """The motor angle is periodic when its normalised autocorrelation reaches this at some lag."""
 
@@ -138,18 +142,6 @@ class Channel:
         return 1.0 - self.floor / 100.0
 
 
-def white_floor_sd(x: np.ndarray, fs_hz: float) -> float:
-    """SD of the white noise on a recorded signal x (T,): the median of its Welch spectrum (2 s
-    Hann windows) between 0.2 and 0.35 x fs, where a joint's motion has little power and a
-    resampler's anti-alias filter (at 0.4 x fs) has not yet cut."""
-    from scipy.signal import welch
-
-    nper = int(min(x.size, max(64, 2 * fs_hz)))
-    f, P = welch(x - np.mean(x), fs=fs_hz, nperseg=nper)
-    band = (f > 0.2 * fs_hz) & (f < 0.35 * fs_hz)
-    return float(np.sqrt(np.median(P[band]) * fs_hz / 2)) if band.any() else 0.0
-
-
 def _period_noise_var(r: np.ndarray, fs_hz: float, period_s: float) -> tuple[float, int]:
     """(variance, pairs of periods used) of the part of r (n,) (uniform, no NaN) that differs
     between consecutive periods: half the mean square of their difference, averaged over the pairs
@@ -178,7 +170,7 @@ def compare_channel(y: np.ndarray, y_hat: np.ndarray, raw: np.ndarray | None, fs
     """A channel's in-band fit and noise floor (module docstring).
 
     y, y_hat : (T,) recorded and predicted (NaN allowed outside `keep`); raw : (T,) the recorded
-    signal whose white floor (:func:`white_floor_sd`) serves when there is no period, and bounds
+    signal whose white floor (over :data:`WHITE_BAND`) serves when there is no period, and bounds
     the floor from below when there is one (None: only when there is no period); keep : (T,) bool,
     the samples compared (a contiguous run); center : compare y - y_hat less its mean (a constant
     the recording cannot fix); bounded : the white floor bounds the period estimate from below
@@ -206,7 +198,7 @@ def compare_channel(y: np.ndarray, y_hat: np.ndarray, raw: np.ndarray | None, fs
     if raw is not None and (bounded or not np.isfinite(v_per)):
         x = np.asarray(raw, dtype=np.float64)
         x = x[np.isfinite(x)]
-        white = white_floor_sd(x, fs_hz) ** 2 * noise_gain(fs_hz, band_hz) if x.size > 64 else 0.0
+        white = noise_floor_sd(x, fs_hz, *WHITE_BAND) ** 2 * noise_gain(fs_hz, band_hz) if x.size > 64 else 0.0
     var = white
     if np.isfinite(v_per) and v_per >= white:
         var, method = v_per, "periods"

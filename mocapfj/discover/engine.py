@@ -332,14 +332,15 @@ def discover(signals: dict, models: dict, *, fs_hz: float, validation: dict | No
     held = {}
 
     def held_out(jn):
-        """[signals, others' accelerations, band, current model's fit, name] of the held-out
-        evidence for joint jn: the validation recording, else the trial."""
+        """(signals, others' accelerations, name, comparisons) of the held-out evidence for joint
+        jn: the validation recording, else the trial; comparisons: the nominal model's, then one
+        per effect kept (the validation's proof reuses them)."""
         if jn not in held:
             on_valid = validation is not None and jn in validation
             data = validation[jn] if on_valid else signals[jn]
             others = {k: v for k, v in (vq if on_valid else qdd).items() if k != jn}
             oe = simulate_joint(current[jn], data.t, data.q, data.q_m, data.u, others)
-            held[jn] = [data, others, oe.band_hz, oe.fit, "validation recording" if on_valid else "trial"]
+            held[jn] = (data, others, "validation recording" if on_valid else "trial", [oe])
         return held[jn]
 
     stop = f"{max_effects} effects found (the most searched for)"
@@ -384,9 +385,11 @@ def discover(signals: dict, models: dict, *, fs_hz: float, validation: dict | No
         if simulate:
             # named only if it also improves the held-out output-error fit (the validation
             # recording's): an equation-error gain can be the model compensating its own misfit
-            data, others, band, fit0, where = held_out(jn)
+            data, others, where, chain = held_out(jn)
+            fit0 = chain[-1].fit
             try:
-                fit1 = simulate_joint(augmented, data.t, data.q, data.q_m, data.u, others, band_hz=band).fit
+                oe1 = simulate_joint(augmented, data.t, data.q, data.q_m, data.u, others, band_hz=chain[0].band_hz)
+                fit1 = oe1.fit
                 why = (f"it changes the {where}'s output-error fit by {fit1 - fit0:+.2f} points: an equation-error "
                        "gain without a simulated one (the model compensating its own misfit, or an effect the "
                        "held-out recording does not excite)")
@@ -396,7 +399,7 @@ def discover(signals: dict, models: dict, *, fs_hz: float, validation: dict | No
                 banned.add((jn, cand.name))
                 rejected.append({"name": cand.name, "joint": jn, "parameters": cand.params, "reason": why})
                 continue
-            held[jn][3] = fit1
+            chain.append(oe1)
         current[jn] = augmented
         found.append({"name": cand.name, "joint": jn, "candidate": cand, "score": score,
                       "p_value": min(1.0, score["p_value"] * n_tests),
@@ -422,8 +425,14 @@ def discover(signals: dict, models: dict, *, fs_hz: float, validation: dict | No
             for jn in names:
                 if jn not in validation:
                     continue
-                before, after, gains = _prove(nominal[jn], [f for f in found if f["joint"] == jn], validation[jn],
-                                              {k: x for k, x in vq.items() if k != jn})
+                mine = [f for f in found if f["joint"] == jn]
+                if jn in held and held[jn][2] == "validation recording":
+                    chain = held[jn][3]                        # simulated already by the gate
+                    before, after = chain[0], chain[-1]
+                    gains = [(f, b.fit - a.fit) for f, a, b in zip(mine, chain, chain[1:])]
+                else:
+                    before, after, gains = _prove(nominal[jn], mine, validation[jn],
+                                                  {k: x for k, x in vq.items() if k != jn})
                 val["effects"] += [{"name": f["name"], "joint": jn, "fit_gain_pct": g} for f, g in gains]
                 val["fit_before"][jn], val["fit_after"][jn], val["fits"][jn] = before.fit, after.fit, _fits(before, after)
     for f in found:

@@ -107,16 +107,17 @@ def white_noise_sd(x: np.ndarray, fs_hz: float) -> float:
     return float(np.sqrt(P[band].mean())) if band.any() else 0.0
 
 
-def noise_floor_sd(x: np.ndarray, fs_hz: float, above: float = 0.25) -> float:
+def noise_floor_sd(x: np.ndarray, fs_hz: float, above: float = 0.25, below: float = 0.5) -> float:
     """SD of the white noise on x (T,), from the median of its Welch spectrum (Hann windows of 2 s,
-    so the leakage of a large slow motion stays far below a quantisation-level floor) above
-    `above` x fs: a robust floor where the motion has no power. 0 when there is no such band."""
+    so the leakage of a large slow motion stays far below a quantisation-level floor) between
+    `above` and `below` x fs: a robust floor where the motion has no power (`below` under 0.4 for
+    a signal resampled through an anti-alias filter at 0.4 x fs). 0 when there is no such band."""
     from scipy.signal import welch
 
     x = np.asarray(x, dtype=np.float64)
     nper = int(min(x.size, max(64, 2 * fs_hz)))
     f, P = welch(x, fs=fs_hz, nperseg=nper)
-    band = f > above * fs_hz
+    band = (f > above * fs_hz) & ((f < below * fs_hz) if below < 0.5 else True)
     return float(np.sqrt(np.median(P[band]) * fs_hz / 2)) if band.any() else 0.0
 
 
