@@ -44,7 +44,7 @@ import numpy as np
 from ..ident.conditioning import lowpass, noise_floor_sd, noise_gain
 
 __all__ = ["BAND_FRACTION", "MIN_BAND_HZ", "MIN_PERIOD_CORR", "comparison_band_hz", "excitation_period_s",
-           "Channel", "compare_channel", "combined_fit", "combined_floor_sd", "WHITE_BAND"]
+           "Channel", "compare_channel", "combined_fit", "combined_floor_sd", "WHITE_BAND", "fit_change_sd"]
 
 BAND_FRACTION = 0.6
 """The comparison band's upper edge as a fraction of the link's resonance sqrt(k / I) / 2 pi: the
@@ -124,7 +124,8 @@ class Channel:
     the in-band noise SD (the channel's unit), how it was estimated ("periods" or "white"), the
     pairs of consecutive periods used, and the floor's own SD in points (periods: from the variance estimate's
     degrees of freedom, 2 band x period per pair of periods; NaN for the white floor, which is an
-    upper bound of the floor when the noise is coloured)."""
+    upper bound of the floor when the noise is coloured); sd_y: the recorded signal's SD in the
+    band (what the fit is normalised by)."""
 
     fit: float
     floor: float
@@ -132,6 +133,7 @@ class Channel:
     method: str
     n_pairs: int
     floor_sd: float = math.nan
+    sd_y: float = math.nan
 
     @property
     def e(self) -> float:
@@ -209,7 +211,7 @@ def compare_channel(y: np.ndarray, y_hat: np.ndarray, raw: np.ndarray | None, fs
         dof = max(1.0, pairs * 2.0 * band_hz * period_s)
         floor_sd = float(100.0 * sd / sd_y * math.sqrt(1.0 / (2.0 * dof)))
     return Channel(fit=fit, floor=floor, noise_sd=sd, method=method, n_pairs=int(pairs) if method == "periods" else 0,
-                   floor_sd=floor_sd)
+                   floor_sd=floor_sd, sd_y=sd_y)
 
 
 def combined_fit(e_delta: float, e_u: float) -> float:
@@ -224,3 +226,35 @@ def combined_floor_sd(d: Channel, u: Channel) -> float:
         return math.nan
     # a white floor's channel counts with no SD of its own (its bias is not a scatter)
     return float(math.hypot(d.e_floor * np.nan_to_num(d.floor_sd), u.e_floor * np.nan_to_num(u.floor_sd)) / (2.0 * e))
+
+
+def fit_change_sd(t: np.ndarray, keep: np.ndarray, band_hz: float, fit: float, channels) -> float:
+    """The SD (points) of the change in a joint's fit between two models compared on one recording
+    in one band that the recording's noise alone gives (docs/conventions.md, "Fit and noise floor").
+
+    With r the in-band residual of the first model and m the change in its prediction, the second's
+    squared error is |r - m|^2 = |r|^2 - 2 <r, m> + |m|^2: only <n, m> with the noise n is random,
+    of variance sigma^2 |m|^2 / g for noise of in-band SD sigma that is white over the band the
+    prediction changes in (g: the low-pass's variance gain, so sigma^2 / g is the noise per
+    sample before it). Carried through fit = 100 (1 - sqrt((e_delta^2 + e_u^2) / 2)) at first order.
+
+    t, keep : (T,) the samples compared; fit : the first model's joint fit %; channels : for each
+    channel (recorded SD in band, noise SD in band, the change of the prediction (T,))."""
+    fs = 1.0 / float(np.median(np.diff(t)))
+    g = noise_gain(fs, band_hz)
+    idx = np.flatnonzero(keep)
+    sl = slice(int(idx[0]), int(idx[-1]) + 1)
+    E = (1.0 - fit / 100.0) ** 2
+    var = 0.0
+    for sd_y, sigma, dm in channels:
+        x = np.nan_to_num(np.asarray(dm, dtype=np.float64)[sl])
+        m = lowpass(x, fs, band_hz)
+        edge = min(int(math.ceil(2.0 * fs / band_hz)), x.size // 4)
+        m = m[edge:x.size - edge]
+        if not (sd_y > 0 and np.isfinite(sigma)):
+            continue
+        # d(e^2) of this channel: 2 <n, m> / (N sd_y^2)
+        var += (2.0 * sigma * float(np.linalg.norm(m)) / math.sqrt(g) / (m.size * sd_y ** 2)) ** 2
+    if not E > 0:
+        return math.nan
+    return float(100.0 / (2.0 * math.sqrt(E)) * 0.5 * math.sqrt(var))

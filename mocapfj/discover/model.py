@@ -125,7 +125,8 @@ class OutputError:
     the same for a perfect model (the recording's noise in that band: noise_delta_rad, noise_u_Nm,
     estimated by floor_method "periods" over the excitation's period_s or "white"), floor_sd,
     floor_sd_delta, floor_sd_u the floors' SDs in points (NaN for a white floor);
-    fit_full_delta, fit_full_u: the fits at full rate, noise included.
+    fit_full_delta, fit_full_u: the fits at full rate, noise included; sd_delta, sd_u: the recorded
+    deflection's and torque's SDs in the band.
     """
 
     t: np.ndarray
@@ -150,6 +151,19 @@ class OutputError:
     noise_u_Nm: float = float("nan")
     fit_full_delta: float = float("nan")
     fit_full_u: float = float("nan")
+    sd_delta: float = float("nan")
+    sd_u: float = float("nan")
+
+    def change_sd(self, other: "OutputError") -> float:
+        """The SD (points) of other.fit - self.fit that this recording's noise alone gives (`other`:
+        another model simulated on the same recording, compared in the same band;
+        :func:`.compare.fit_change_sd`)."""
+        from .compare import fit_change_sd
+
+        keep = np.isfinite(self.r_delta) & np.isfinite(other.r_delta)
+        return fit_change_sd(self.t, keep, self.band_hz, self.fit,
+                             [(self.sd_delta, self.noise_delta_rad, other.delta_sim - self.delta_sim),
+                              (self.sd_u, self.noise_u_Nm, other.u_sim - self.u_sim)])
 
     def summary(self) -> dict:
         """The comparison's numbers (discovery.json)."""
@@ -265,4 +279,5 @@ def simulate_joint(model: JointModel, t, q, q_m, u, others_qdd: dict | None = No
                        floor_sd=combined_floor_sd(cd, cu), floor_sd_delta=cd.floor_sd, floor_sd_u=cu.floor_sd,
                        band_hz=band, period_s=period_s, floor_method=cd.method if cd.method == cu.method else
                        f"{cd.method}/{cu.method}", noise_delta_rad=cd.noise_sd, noise_u_Nm=cu.noise_sd,
-                       fit_full_delta=float(100 * (1 - e_d)), fit_full_u=float(100 * (1 - e_u)))
+                       fit_full_delta=float(100 * (1 - e_d)), fit_full_u=float(100 * (1 - e_u)),
+                       sd_delta=cd.sd_y, sd_u=cu.sd_y)
