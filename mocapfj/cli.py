@@ -231,6 +231,15 @@ def _cmd_discover(args) -> int:
                 line += (f"; validation {v['fit_before'][j]:.2f} % -> {v['fit_after'][j]:.2f} % "
                          f"(floor {v['fits'][j]['after']['floor']:.2f} %)")
             lines.append(line)
+            r = s.get("reidentified", {}).get(j)
+            if r and "error" not in r:
+                line = (f"  {j} re-identified, nominal parameters free (on the {r['evidence']}): fit "
+                        f"{r['fit_nominal']:.2f} % nominal, {r['fit_reidentified']:.2f} % re-identified")
+                if "fit_with_effects" in r:
+                    line += f", {r['fit_with_effects']:.2f} % with {', '.join(e['name'] for e in r['effects'])}"
+                lines.append(line + f"; adopted: {r['adopted']}")
+            elif r:
+                lines.append(f"  {j}: {r['error']}")
         lines.append(f"  wrote {args.out}/discovery.json, model.toml, residuals.csv")
         return "\n".join(lines)
 

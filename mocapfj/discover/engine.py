@@ -30,6 +30,7 @@ from ..types import JointSignals
 from ..ident.conditioning import derivatives, lowpass
 from .effects import EFFECTS, FITTERS, SPRING_EFFECTS, Candidate
 from .model import simulate_joint
+from .reident import REID_EFFECTS
 from .residuals import Families, families
 
 __all__ = ["Discovery", "discover", "locate", "effective_n", "GAP_POINTS", "GAIN_MIN_POINTS"]
@@ -37,6 +38,9 @@ __all__ = ["Discovery", "discover", "locate", "effective_n", "GAP_POINTS", "GAIN
 GAIN_MIN_POINTS = 0.0
 """An effect must raise the held-out output-error fit (the validation recording's, else the trial's)
 by more than this to be named."""
+GAIN_SDS = 3.0
+"""An effect the re-identification fits is named when it raises the held-out fit by more than this
+many SDs of that change the recording's noise gives (:meth:`.model.OutputError.change_sd`)."""
 GAP_POINTS = 1.0
 """A model whose in-band fit of the deflection or of the torque stays more than this many points
 (or two SDs of that floor, when those are more) below the recording's noise floor leaves a
@@ -55,7 +59,9 @@ class Discovery:
     rejected, or the effect limit),
     `remaining` (joint -> the residuals left against their noise floors, and whether a mismatch
     the library does not explain remains), `rejected` (effects the search found but did not keep:
-    a non-physical fit, or no gain on the held-out recording; each with its reason)."""
+    a non-physical fit, or no gain on the held-out recording; each with its reason), `reidentified`
+    (joint -> the augmented re-identification's report: the nominal parameters identified again,
+    the effects it fitted and the held-out fits that judged them)."""
 
     effects: list
     models: dict
@@ -71,6 +77,7 @@ class Discovery:
     recording: str = ""
     model_source: str = ""
     rejected: list = field(default_factory=list)
+    reidentified: dict = field(default_factory=dict)
 
     @property
     def verdict(self) -> str:
@@ -81,19 +88,34 @@ class Discovery:
                  "the noise floor)" for j, r in self.remaining.items()
                  if r.get("fit_unexplained") and not (r["spring_unexplained"] or r["link_unexplained"])]
         found = ", ".join(f"{e['name']} ({e['joint']})" for e in self.effects)
+        off = [f"{j} ({_changes(r['parameters'])})" for j, r in self.reidentified.items()
+               if r.get("adopted") == "re-identified nominal"]
+        if off:
+            found = (found + "; " if found else "") + "the nominal parameters re-identified on " + ", ".join(off)
         if not self.effects and not left:
-            return "no missing physics found"
+            return "no missing physics found" + (f"; {found}" if off else "")
         if not left:
-            return f"missing physics: {found}"
+            return f"missing physics: {found}" if self.effects else found
         tail = "a mismatch no effect of the library explains remains on " + ", ".join(left) + " (see location)"
-        return f"missing physics: {found}; {tail}" if self.effects else f"no effect of the library found; {tail}"
+        return (f"missing physics: {found}; {tail}" if self.effects else
+                f"no effect of the library found; {found + '; ' if off else ''}{tail}")
 
     def to_dict(self) -> dict:
         """discovery.json (``mocapfj discover --json``): docs/discovery.md lists the keys."""
         return {"recording": self.recording, "model": self.model_source, "effects": self.effects,
                 "fit_before": self.fit_before, "fit_after": self.fit_after, "fits": self.fits,
                 "location": self.location, "validation": self.validation, "stopped": self.stopped,
-                "remaining": self.remaining, "rejected": self.rejected, "verdict": self.verdict}
+                "remaining": self.remaining, "rejected": self.rejected, "reidentified": self.reidentified,
+                "verdict": self.verdict}
+
+
+def _changes(params: dict) -> str:
+    """The re-identified parameters that moved most (by more than GAIN_SDS of their SDs or 5 %),
+    as changes in % with their size in SDs."""
+    moved = [(n, p) for n, p in params.items() if p["change_pct"] is not None and p["sds"] is not None
+             and (abs(p["sds"]) > GAIN_SDS or abs(p["change_pct"]) > 5.0)]
+    moved.sort(key=lambda x: -abs(x[1]["sds"]))
+    return ", ".join(f"{n} {p['change_pct']:+.0f} % ({p['sds']:+.1f} SD)" for n, p in moved[:3]) or "small changes"
 
 
 def effective_n(r: np.ndarray) -> float:
@@ -287,23 +309,167 @@ def _fits(before, after) -> dict:
     return {"before": before.summary(), "after": after.summary()}
 
 
-def _prove(model, found: list, s: JointSignals, others: dict):
-    """Output-error fits of `model` and of it with each found effect added in turn: (before,
-    after, [(effect, fit gain %)])."""
+def _prove(model, steps: list, s: JointSignals, others: dict):
+    """Output-error fits of `model` and of each model of `steps` in turn (the model after each
+    step of the search): (before, after, [fit gain % of each step])."""
     before = simulate_joint(model, s.t, s.q, s.q_m, s.u, others)
     prev, gains = before, []
-    for f in found:
-        model = f["candidate"].apply(model)
+    for m in steps:
         # in the nominal model's band: fits in different bands are not comparable
-        cur = simulate_joint(model, s.t, s.q, s.q_m, s.u, others, band_hz=before.band_hz)
-        gains.append((f, cur.fit - prev.fit))
+        cur = simulate_joint(m, s.t, s.q, s.q_m, s.u, others, band_hz=before.band_hz)
+        gains.append(cur.fit - prev.fit)
         prev = cur
     return before, prev, gains
 
 
+def _steps(found: list, jn: str) -> tuple[list, list]:
+    """The distinct models the search went through on joint jn, in order, and the index of each
+    found effect's step (effects found together share one)."""
+    models, index = [], []
+    for f in found:
+        if f["joint"] != jn:
+            continue
+        if not models or f["model"] is not models[-1]:
+            models.append(f["model"])
+        index.append(len(models) - 1)
+    return models, index
+
+
+def _reidentification(jn, s, nominal, current, found, rejected, held_out, on_valid, holdout, others_trial) -> dict:
+    """The re-identification of joint jn (:mod:`.reident`) judged on the held-out evidence (the
+    validation recording, else the trial's last `holdout` part, the identification then made on
+    the rest); updates `current`, `found`, `rejected` and the held-out chain. Returns the report
+    (docs/discovery.md, "reidentified").
+
+    - Effects it fits (a stiffening or hysteretic spring, a clock offset) are named when they raise
+      the held-out fit over the same re-identification without them by more than GAIN_SDS x the
+      SD of that change the recording's noise gives, and beat the model the search found. The
+      search's effects that the re-identified one replaces (the same name, a spring or a clock
+      of its own) are rejected; the others are kept if they still raise the held-out fit on it.
+    - Otherwise the search's effects stand only if the model with them fits the held-out evidence
+      better than the re-identified one without any (else they followed the nominal model's
+      error); a nominal model with no effect found is replaced by the re-identified one when that
+      fits better by GAIN_SDS x its SD (the nominal parameters were off).
+    """
+    from .reident import segment, reidentify
+
+    if on_valid:
+        data, others, where, chain = held_out(jn)
+        train = s
+    else:
+        cut = float(s.t[0] + (1.0 - holdout) * (s.t[-1] - s.t[0]))
+        data, train, where = segment(s, 1.0 - holdout, 1.0), segment(s, 0.0, 1.0 - holdout), "trial's held-out part"
+        m = s.t >= cut
+        others = {k: v[m] for k, v in others_trial.items()}
+        chain = [simulate_joint(nominal, data.t, data.q, data.q_m, data.u, others)]
+        for st in _steps(found, jn)[0]:
+            chain.append(simulate_joint(st, data.t, data.q, data.q_m, data.u, others, band_hz=chain[0].band_hz))
+    band = chain[0].band_hz
+
+    def sim(model):
+        return simulate_joint(model, data.t, data.q, data.q_m, data.u, others, band_hz=band)
+
+    try:
+        R = reidentify(train, nominal)
+        oe_base = sim(R.base)
+    except (InputError, RuntimeError, FloatingPointError, np.linalg.LinAlgError) as e:
+        return {"error": f"not re-identified: {e}"}
+    oe_nom, oe_cur = chain[0], chain[-1]
+    report = {"evidence": where, "parameters": R.parameters, "fit_nominal": oe_nom.fit, "fit_found": oe_cur.fit,
+              "fit_reidentified": oe_base.fit, "fit_reidentified_sd": oe_nom.change_sd(oe_base),
+              "effects": [dict(name=e["name"], parameters=e["parameters"]) for e in R.effects], "adopted": "none"}
+    mine = [f for f in found if f["joint"] == jn]
+    if R.effects:
+        try:
+            oe_mod = sim(R.model)
+        except (InputError, RuntimeError, FloatingPointError) as e:
+            oe_mod = None
+            report["effects_error"] = str(e)
+        if oe_mod is not None:
+            gain, sd = oe_mod.fit - oe_base.fit, oe_base.change_sd(oe_mod)
+            report.update(fit_with_effects=oe_mod.fit, gain=gain, gain_sd=sd)
+            names_r = {e["name"] for e in R.effects}
+            if gain > max(GAIN_MIN_POINTS, GAIN_SDS * sd) and oe_mod.fit > oe_cur.fit:
+                spring_r = bool(names_r & {"stiffening", "hysteresis"})
+                keep, model = [], R.model
+                for f in mine:
+                    clash = (f["name"] in names_r or (spring_r and f["name"] in ("stiffening", "hysteresis", "backlash"))
+                             or (f["name"] == "time_delay" and "time_delay" in names_r))
+                    if clash:
+                        rejected.append({"name": f["name"], "joint": jn, "parameters": f["candidate"].params,
+                                         "reason": "the re-identification with the nominal parameters free fits the "
+                                                   f"{where} better with {', '.join(sorted(names_r))} "
+                                                   f"({oe_mod.fit:.2f} against {oe_cur.fit:.2f} %)"})
+                        continue
+                    try:
+                        model = f["candidate"].apply(model)
+                        keep.append(f)
+                    except InputError:
+                        rejected.append({"name": f["name"], "joint": jn, "parameters": f["candidate"].params,
+                                         "reason": "not physical on the re-identified model"})
+                chain_new = [oe_nom, oe_mod]
+                if keep:
+                    try:
+                        oe_k = sim(model)
+                        ok = oe_k.fit > oe_mod.fit
+                    except (InputError, RuntimeError, FloatingPointError):
+                        ok = False
+                    if ok:
+                        chain_new.append(oe_k)
+                    else:
+                        for f in keep:
+                            rejected.append({"name": f["name"], "joint": jn, "parameters": f["candidate"].params,
+                                             "reason": "with the nominal parameters re-identified it no longer raises "
+                                                       f"the {where}'s fit"})
+                        keep, model = [], R.model
+                z = gain / sd if sd > 0 else np.inf
+                from scipy import stats as _st
+                new = [{"name": e["name"], "joint": jn, "model": R.model, "explanation": e["explanation"],
+                        "parameters": e["parameters"], "score": {"gain": gain, "gain_sd": sd},
+                        "p_value": float(_st.norm.sf(z)) * len(REID_EFFECTS)} for e in R.effects]
+                for f in keep:
+                    f["model"] = model
+                found[:] = [f for f in found if f["joint"] != jn] + new + keep
+                current[jn] = model
+                if on_valid:
+                    chain[:] = chain_new
+                report["adopted"] = "with effects"
+                return report
+            by_name = {f["name"]: f for f in mine}
+            for e in R.effects:
+                if e["name"] in by_name:
+                    # the search's own fit of it stands; the re-identification confirms it
+                    by_name[e["name"]]["confirmed"] = {"gain_points": gain, "gain_sd_points": sd,
+                                                       "parameters": e["parameters"]}
+                    continue
+                rejected.append({"name": e["name"], "joint": jn, "parameters": e["parameters"],
+                                 "reason": (f"re-identified with it, the {where}'s fit changes by {gain:+.2f} points "
+                                            f"against the re-identification without it (noise SD {sd:.2f})"
+                                            + ("" if gain > GAIN_SDS * sd else ": no more than the noise")
+                                            + ("" if oe_mod.fit > oe_cur.fit else
+                                               f"; below the model the search found ({oe_cur.fit:.2f} %)"))})
+    if mine and oe_base.fit > oe_cur.fit:
+        for f in mine:
+            rejected.append({"name": f["name"], "joint": jn, "parameters": f["candidate"].params,
+                             "reason": f"the nominal parameters re-identified without it fit the {where} better "
+                                       f"({oe_base.fit:.2f} against {oe_cur.fit:.2f} %): it followed the nominal "
+                                       "model's error"})
+        found[:] = [f for f in found if f["joint"] != jn]
+        current[jn] = R.base
+        if on_valid:
+            chain[:] = [oe_nom, oe_base]
+        report["adopted"] = "re-identified nominal"
+    elif not mine and oe_base.fit - oe_nom.fit > max(GAIN_MIN_POINTS, GAIN_SDS * report["fit_reidentified_sd"]):
+        current[jn] = R.base
+        if on_valid:
+            chain[:] = [oe_nom, oe_base]
+        report["adopted"] = "re-identified nominal"
+    return report
+
+
 def discover(signals: dict, models: dict, *, fs_hz: float, validation: dict | None = None, holdout: float = 0.3,
              alpha: float = 1e-10, min_explained: float = 0.003, max_effects: int = 3,
-             effects=EFFECTS, simulate: bool = True) -> Discovery:
+             effects=EFFECTS, simulate: bool = True, reidentify: bool = True) -> Discovery:
     """Discover what `models` miss in the recording `signals` (joint -> JointSignals).
 
     alpha : significance after the Bonferroni correction over the effects and joints tried.
@@ -312,6 +478,8 @@ def discover(signals: dict, models: dict, *, fs_hz: float, validation: dict | No
         35 N m RMS; below that no engineer would change a model, and what the search finds is the
         model compensating its own small misfits).
     simulate : run the output-error simulations (fit before / after); False for the search alone.
+    reidentify : re-identify each joint with its nominal parameters free (:mod:`.reident`): the
+        effects output error fits itself, and the found ones checked against it (needs simulate).
     """
     unknown = [e for e in effects if e not in FITTERS]
     if unknown:
@@ -401,22 +569,33 @@ def discover(signals: dict, models: dict, *, fs_hz: float, validation: dict | No
                 continue
             chain.append(oe1)
         current[jn] = augmented
-        found.append({"name": cand.name, "joint": jn, "candidate": cand, "score": score,
+        found.append({"name": cand.name, "joint": jn, "candidate": cand, "score": score, "model": augmented,
                       "p_value": min(1.0, score["p_value"] * n_tests),
                       "runner_up": sorted(((c.name, s["explained_Nm"]) for j, c, s in results if j == jn and c.name != cand.name),
                                           key=lambda x: -x[1])[:3]})
         fams, qdd = _families_all(current, signals, fs_hz)
     else:
         stop = "every further significant effect was rejected (see rejected)"
+    reidentified = {}
+    if simulate and reidentify:
+        # the nominal parameters free: the effects output error fits itself, and the found ones
+        # checked against the nominal model re-identified (module .reident)
+        for jn in names:
+            reidentified[jn] = _reidentification(jn, signals[jn], nominal[jn], current, found, rejected, held_out,
+                                                 validation is not None and jn in validation, holdout,
+                                                 {k: v for k, v in qdd.items() if k != jn})
+        fams, qdd = _families_all(current, signals, fs_hz)
     effects_out, fit_before, fit_after, fits, residuals = [], {}, {}, {}, {}
     val = None
     if simulate:
         for jn in names:
             s = signals[jn]
-            before, after, gains = _prove(nominal[jn], [f for f in found if f["joint"] == jn], s,
-                                          {k: v for k, v in qdd.items() if k != jn})
-            for f, g in gains:
-                f["fit_gain_pct"] = g
+            steps, index = _steps(found, jn)
+            if not steps and current[jn] is not nominal[jn]:
+                steps = [current[jn]]                    # the nominal re-identified, no effect
+            before, after, gains = _prove(nominal[jn], steps, s, {k: v for k, v in qdd.items() if k != jn})
+            for f, i in zip([f for f in found if f["joint"] == jn], index):
+                f["fit_gain_pct"] = gains[i]
             fit_before[jn], fit_after[jn], fits[jn] = before.fit, after.fit, _fits(before, after)
             residuals[jn] = {"t": s.t, "r_delta_before": before.r_delta, "r_u_before": before.r_u,
                              "r_delta_after": after.r_delta, "r_u_after": after.r_u}
@@ -426,22 +605,35 @@ def discover(signals: dict, models: dict, *, fs_hz: float, validation: dict | No
                 if jn not in validation:
                     continue
                 mine = [f for f in found if f["joint"] == jn]
-                if jn in held and held[jn][2] == "validation recording":
+                steps, index = _steps(found, jn)
+                if not steps and current[jn] is not nominal[jn]:
+                    steps = [current[jn]]
+                if jn in held and held[jn][2] == "validation recording" and len(held[jn][3]) == len(steps) + 1:
                     chain = held[jn][3]                        # simulated already by the gate
                     before, after = chain[0], chain[-1]
-                    gains = [(f, b.fit - a.fit) for f, a, b in zip(mine, chain, chain[1:])]
+                    step_gain = [b.fit - a.fit for a, b in zip(chain, chain[1:])]
                 else:
-                    before, after, gains = _prove(nominal[jn], mine, validation[jn],
-                                                  {k: x for k, x in vq.items() if k != jn})
-                val["effects"] += [{"name": f["name"], "joint": jn, "fit_gain_pct": g} for f, g in gains]
+                    before, after, step_gain = _prove(nominal[jn], steps, validation[jn],
+                                                      {k: x for k, x in vq.items() if k != jn})
+                val["effects"] += [{"name": f["name"], "joint": jn, "fit_gain_pct": step_gain[i]}
+                                   for f, i in zip(mine, index)]
                 val["fit_before"][jn], val["fit_after"][jn], val["fits"][jn] = before.fit, after.fit, _fits(before, after)
     for f in found:
-        c = f["candidate"]
+        c = f.get("candidate")
+        if c is None:                                   # found by the re-identification
+            effects_out.append({"name": f["name"], "joint": f["joint"], "explanation": f["explanation"],
+                                "location": {"residual": "output error", "found_by": "re-identification",
+                                             "held_out_gain_points": f["score"]["gain"],
+                                             "held_out_gain_sd_points": f["score"]["gain_sd"]},
+                                "parameters": f["parameters"], "p_value": f["p_value"],
+                                "fit_gain_pct": f.get("fit_gain_pct"), "runner_up": []})
+            continue
         effects_out.append({"name": c.name, "joint": f["joint"], "explanation": c.explain(f["score"]),
                             "location": {**c.location, "residual": c.family,
                                          "explained_torque_rms_Nm": f["score"]["explained_Nm"]},
                             "parameters": c.params, "p_value": f["p_value"],
-                            "fit_gain_pct": f.get("fit_gain_pct"), "runner_up": f["runner_up"]})
+                            "fit_gain_pct": f.get("fit_gain_pct"), "runner_up": f["runner_up"],
+                            **({"confirmed_by_reidentification": f["confirmed"]} if "confirmed" in f else {})})
     remaining = {jn: _remaining(fams[jn], signals[jn]) for jn in names}
     for jn in fits:
         # the comparison's verdict: the augmented model's fit against the recording's noise floor
@@ -454,4 +646,4 @@ def discover(signals: dict, models: dict, *, fs_hz: float, validation: dict | No
         remaining[jn]["unexplained"] = bool(remaining[jn]["unexplained"] or over)
     return Discovery(effects=effects_out, models=current, nominal=nominal, fit_before=fit_before, fit_after=fit_after,
                      fits=fits, location=location, validation=val, residuals=residuals, stopped=stop,
-                     remaining=remaining, rejected=rejected)
+                     remaining=remaining, rejected=rejected, reidentified=reidentified)

@@ -1,0 +1,132 @@
+"""Augmented re-identification: the joint identified again from the recording, its nominal
+parameters free, by the output-error estimator of identification (:mod:`mocapfj.ident.output_error`)
+with the effects that estimator fits itself: a stiffening (cubic) spring, a hysteretic (Bouc-Wen)
+spring and an offset between the mocap and controller clocks (docs/discovery.md).
+
+Why. The equation-error search of :mod:`.engine` fits each effect against the nominal model's
+residual, the nominal parameters held. A nominal model that is off (an inertia 16 % low, a
+stiffness 8 % high) leaves a residual of its own, which an effect can follow (a fake) or cover (a
+hidden effect); and an effect of a fraction of the mocap noise per sample is lost in an
+equation-error residual that differentiates that noise, while the output error's simulation
+averages it out (benchmarks/bench_discover_grid.py: cubic stiffenings of 0.3-0.8 x the deflection
+noise on light joints). Here the effect and the nominal parameters are fitted together, and
+the effect is judged against the same re-identification without it (`base`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..dynamics import JointModel
+from ..types import JointSignals
+
+__all__ = ["Reidentified", "reidentify", "segment", "REID_EFFECTS"]
+
+REID_EFFECTS = ("stiffening", "hysteresis", "time_delay")
+"""The effects the re-identification fits with the nominal parameters."""
+_NOMINAL = ("I", "J", "mglx", "mgly", "b", "k", "c", "v")
+
+
+@dataclass(frozen=True, eq=False)
+class Reidentified:
+    """A joint re-identified (module docstring): `model` with the effects found (`effects`: list of
+    {name, parameters, explanation}), `base` the same identification with a linear spring on the
+    declared clocks, `parameters` {name: {nominal, value, std, change_pct, sds}} of `base` against
+    the nominal model (sds: the change in the identification's SDs), `identification` the
+    :class:`mocapfj.ident.IdentifiedJoint` of `model`."""
+
+    model: JointModel
+    base: JointModel
+    effects: list
+    parameters: dict
+    identification: object = field(repr=False, default=None)
+
+
+def segment(s: JointSignals, start: float, end: float) -> JointSignals:
+    """The part of a joint's signals between fractions `start` and `end` of its span (mocap and
+    controller samples alike)."""
+    t0, t1 = float(s.t[0]), float(s.t[-1])
+    a, b = t0 + start * (t1 - t0), t0 + end * (t1 - t0)
+    m = (s.t >= a) & (s.t <= b)
+    kw = {}
+    if s.t_c is not None:
+        mc = (s.t_c >= a - 1e-9) & (s.t_c <= b + 1e-9)
+        kw = {"t_c": s.t_c[mc], "q_m_c": s.q_m_c[mc], "u_c": s.u_c[mc], "fs_c_hz": s.fs_c_hz}
+    filled = None if s.filled is None else s.filled[m]
+    return JointSignals(t=s.t[m], q=s.q[m], q_m=s.q_m[m], u=s.u[m], fs_hz=s.fs_hz,
+                        n_filled=int(filled.sum()) if filled is not None else 0, name=s.name, filled=filled, **kw)
+
+
+def _keep_terms(model: JointModel, nominal: JointModel) -> JointModel:
+    """The re-identified model with the nominal's name and its terms single-joint output error
+    does not fit (coupling, transmission error, position torque, torque gain)."""
+    return model.with_(name=nominal.name, coupling=dict(nominal.coupling), transmission_error=nominal.transmission_error,
+                       position_torque=nominal.position_torque, torque_gain=nominal.torque_gain)
+
+
+def _effects_of(ident, s: JointSignals) -> list[dict]:
+    """The effects the identification kept, each with its parameters (and SDs where it has them)
+    and what an engineer is told."""
+    out = []
+    sp = ident.spring
+    if sp.model == "cubic":
+        k1, k3 = float(sp.params["k1"]), float(sp.params["k3"])
+        # the deflection the spring carries the motor torque with (the mocap deflection is mostly
+        # noise on a light joint)
+        d95 = float(np.percentile(np.abs(s.u), 95)) / k1
+        change = 300.0 * k3 * d95 ** 2 / k1
+        out.append({"name": "stiffening", "parameters": {"k1": k1, "k3": k3, "k3_std": float(sp.params.get("k3_std", np.nan)),
+                                                         "stiffness_change_pct_at_d95": change, "d95_rad": d95},
+                    "explanation": (f"The joint's stiffness {'rises' if k3 > 0 else 'falls'} with the load: the spring is "
+                                    f"k1 delta + k3 delta^3 with k1 {k1:.4g} N m/rad and k3 {k3:.3g} N m/rad^3 "
+                                    f"(+- {sp.params.get('k3_std', np.nan):.2g}), {change:+.1f} % stiffness at the "
+                                    f"{1e3 * d95:.3g} mrad the joint reaches 5 % of the time. Harmonic drives stiffen "
+                                    "as more flexspline teeth come into contact; found with the nominal parameters "
+                                    "identified with it by output error.")})
+    elif sp.model == "bouc_wen":
+        p = {k: float(v) for k, v in sp.params.items()}
+        half = 1.0 / (p["beta"] + p["gamma"])
+        out.append({"name": "hysteresis", "parameters": {**p, "loop_half_width_rad": half},
+                    "explanation": (f"The spring torque depends on the direction the deflection last moved: "
+                                    f"{100 * (1 - p['alpha']):.1f} % of the stiffness {p['k']:.4g} N m/rad acts through "
+                                    f"a hysteretic state whose loop saturates over about {1e3 * half:.3g} mrad. "
+                                    "Hysteresis in the harmonic drive's flexspline contact; found with the nominal "
+                                    "parameters identified with it by output error.")})
+    clock = ident.extra.get("clock_offset") or {}
+    if clock.get("applied"):
+        d, sd = float(clock["offset_s"]), float(clock["sd_s"])
+        out.append({"name": "time_delay", "parameters": {"delay_s": d, "delay_sd_s": sd},
+                    "explanation": (f"The mocap samples are {1e3 * abs(d):.3g} +- {1e3 * sd:.2g} ms "
+                                    f"{'late' if d > 0 else 'early'} on the controller's clock: the link's motion "
+                                    "shows a phase the dynamics cannot make. A delay in the logging or an "
+                                    "undeclared clock offset; found with the nominal parameters identified with it.")})
+    return out
+
+
+def reidentify(s: JointSignals, nominal: JointModel) -> Reidentified:
+    """Re-identify a joint with its nominal parameters free (module docstring). Raises InputError
+    when the signals cannot be identified (too short, non-physical)."""
+    from ..ident.joint import identify_signals
+
+    full = identify_signals(s, gear_ratio=nominal.gear_ratio, spring_models=("linear", "cubic", "bouc_wen"),
+                            fit_clock_offset=True)
+    effects = _effects_of(full, s)
+    delay = next((e["parameters"]["delay_s"] for e in effects if e["name"] == "time_delay"), 0.0)
+    model = _keep_terms(full.model, nominal).with_(delay_s=float(delay))
+    plain = full if not effects else identify_signals(s, gear_ratio=nominal.gear_ratio, spring_models=("linear",))
+    base = _keep_terms(plain.model, nominal)
+    params = {}
+    for n in _NOMINAL:
+        p = plain.params.get(n)
+        if p is None:
+            continue
+        nom = float(nominal.stiffness()) if n == "k" else float(getattr(nominal, n, np.nan))
+        if n in ("c", "v"):
+            nom = float(getattr(nominal.friction, n, np.nan))
+        sd = float(p.std)
+        params[n] = {"nominal": nom, "value": float(p.value), "std": sd,
+                     "change_pct": float(100.0 * (p.value - nom) / nom) if nom else None,
+                     "sds": float((p.value - nom) / sd) if sd > 0 and np.isfinite(sd) else None}
+    return Reidentified(model=model, base=base, effects=effects, parameters=params, identification=full)
