@@ -423,10 +423,9 @@ def _reidentification(jn, s, nominal, current, found, rejected, held_out, on_val
                                                        f"the {where}'s fit"})
                         keep, model = [], R.model
                 z = gain / sd if sd > 0 else np.inf
-                from scipy import stats as _st
                 new = [{"name": e["name"], "joint": jn, "model": R.model, "explanation": e["explanation"],
                         "parameters": e["parameters"], "score": {"gain": gain, "gain_sd": sd},
-                        "p_value": float(_st.norm.sf(z)) * len(REID_EFFECTS)} for e in R.effects]
+                        "p_value": min(1.0, float(stats.norm.sf(z)) * len(REID_EFFECTS))} for e in R.effects]
                 for f in keep:
                     f["model"] = model
                 found[:] = [f for f in found if f["joint"] != jn] + new + keep
