@@ -14,7 +14,12 @@ show the fit improve (issue "mismatch discovery"; docs/discovery.md).
    effects the one with the lowest criterion (the largest gain for its complexity) is added to
    the model, the residuals recomputed, and the search repeated until nothing significant is left
    (or the residuals are white); the chosen effects are refitted on the whole trial.
-4. Prove: the augmented model's output-error fit against the nominal one, on the trial and on a
+4. Re-identify (:mod:`.reident`): each joint identified again by output error with its nominal
+   parameters free and the effects that estimator fits (stiffening, hysteresis, clock offset);
+   its effects named when they beat the same re-identification without them by GAIN_SDS noise
+   SDs on the held-out evidence, the search's effects rejected when that re-identification
+   without any effect fits better than they do.
+5. Prove: the augmented model's output-error fit against the nominal one, on the trial and on a
    validation recording.
 """
 
