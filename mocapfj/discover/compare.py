@@ -166,6 +166,12 @@ def _period_noise_var(r: np.ndarray, fs_hz: float, period_s: float) -> tuple[flo
     return float(np.mean(v)), v.size            # dropouts, unevenly spread, stay in
 
 
+def _in_band(x: np.ndarray, fs_hz: float, band_hz: float) -> np.ndarray:
+    """x (n,) through the comparison's low-pass, the filter's own start and end cut off."""
+    edge = min(int(math.ceil(2.0 * fs_hz / band_hz)), x.size // 4)
+    return lowpass(x, fs_hz, band_hz)[edge:x.size - edge]
+
+
 def compare_channel(y: np.ndarray, y_hat: np.ndarray, raw: np.ndarray | None, fs_hz: float, band_hz: float,
                     keep: np.ndarray, period_s: float | None, center: bool = False,
                     bounded: bool = False) -> Channel:
@@ -185,10 +191,7 @@ def compare_channel(y: np.ndarray, y_hat: np.ndarray, raw: np.ndarray | None, fs
     ar = np.arange(yy.size)
     yy = np.interp(ar, ar[ok], yy[ok])
     yh = np.interp(ar, ar[ok], yh[ok])
-    yb = lowpass(yy, fs_hz, band_hz)
-    rb = lowpass(yy - yh, fs_hz, band_hz)
-    edge = min(int(math.ceil(2.0 * fs_hz / band_hz)), yy.size // 4)   # the filter's own start and end
-    yb, rb = yb[edge:yy.size - edge], rb[edge:yy.size - edge]
+    yb, rb = _in_band(yy, fs_hz, band_hz), _in_band(yy - yh, fs_hz, band_hz)
     if center:
         rb = rb - rb.mean()
     sd_y = float(np.std(yb))
@@ -247,12 +250,9 @@ def fit_change_sd(t: np.ndarray, keep: np.ndarray, band_hz: float, fit: float, c
     E = (1.0 - fit / 100.0) ** 2
     var = 0.0
     for sd_y, sigma, dm in channels:
-        x = np.nan_to_num(np.asarray(dm, dtype=np.float64)[sl])
-        m = lowpass(x, fs, band_hz)
-        edge = min(int(math.ceil(2.0 * fs / band_hz)), x.size // 4)
-        m = m[edge:x.size - edge]
         if not (sd_y > 0 and np.isfinite(sigma)):
             continue
+        m = _in_band(np.nan_to_num(np.asarray(dm, dtype=np.float64)[sl]), fs, band_hz)
         # d(e^2) of this channel: 2 <n, m> / (N sd_y^2)
         var += (2.0 * sigma * float(np.linalg.norm(m)) / math.sqrt(g) / (m.size * sd_y ** 2)) ** 2
     if not E > 0:

@@ -362,9 +362,8 @@ def _reidentification(jn, s, nominal, current, found, rejected, held_out, on_val
         data, others, where, chain = held_out(jn)
         train = s
     else:
-        cut = float(s.t[0] + (1.0 - holdout) * (s.t[-1] - s.t[0]))
         data, train, where = segment(s, 1.0 - holdout, 1.0), segment(s, 0.0, 1.0 - holdout), "trial's held-out part"
-        m = s.t >= cut
+        m = (s.t >= data.t[0]) & (s.t <= data.t[-1])
         others = {k: v[m] for k, v in others_trial.items()}
         chain = [simulate_joint(nominal, data.t, data.q, data.q_m, data.u, others)]
         for st in _steps(found, jn)[0]:
