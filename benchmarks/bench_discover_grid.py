@@ -14,6 +14,17 @@ shares no code with discovery's comparison or effect library). Each case is reco
   deflection, (1 - alpha) z_max, is s x the deflection noise;
 - ``time_delay``: the controller log stamped d late, with |d| = s x deflection noise / RMS link
   velocity (the deflection error a delay leaves is q' d), either sign.
+- ``stribeck``: breakaway friction F = (c + e exp(-|q'/vs|^x)) sgn(q') + v q' with x 1 or 2,
+  vs logU(0.005, 0.1) rad/s and the excess e = s x deflection noise x k (the deflection the
+  extra link torque causes at rest), capped at c;
+- ``friction_asymmetry``: Coulomb c +- dc and viscous v +- dv on the two directions, the
+  deflection offset between them (dc + dv RMS|q'|) / k being s x the deflection noise, a share
+  U(0.5, 1) of it in dc, either sign; dc capped at c / 2, dv at v / 2;
+- ``backlash``: free play of total width 2 s x the deflection noise in front of the spring;
+- ``transmission_error``: e = a1 sin(N q_m + phi1) + a2 sin(2 N q_m + phi2), phases U(0, 2 pi),
+  RMS s x the deflection noise shared U(0, 1) between the orders.
+
+A planted size that a cap cuts is reported (column ``size``).
 
 Each recording has a validation recording: the same joint and effect, a new excitation (new
 harmonic amplitudes and phases at the same f0 and peak) and new noise. Discovery runs as a lab
@@ -59,7 +70,8 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "benchmarks"))
 
-KINDS = ("control", "stiffening", "hysteresis", "time_delay")
+KINDS = ("control", "stiffening", "hysteresis", "time_delay", "stribeck", "friction_asymmetry", "backlash",
+         "transmission_error")
 ALPHA_HYST = 0.7
 
 
@@ -90,9 +102,10 @@ def _shift_controller(bundle: Path, delay_s: float) -> None:
 
 def _write(case, d: Path, delay_s: float = 0.0) -> dict:
     from mocapfj.io import read_json
-    from mocapfj.synth.hinge import write_hinge_bundle
+    from mocapfj.synth.hinge import case_digest, write_hinge_bundle
 
-    if not (d / "truth.json").exists() or read_json(d / "truth.json").get("planted_delay_s", 0.0) != delay_s:
+    t = read_json(d / "truth.json") if (d / "truth.json").exists() else {}
+    if t.get("planted_delay_s", 0.0) != delay_s or t.get("case_sha256") != case_digest(case):
         if d.exists():
             shutil.rmtree(d)
         write_hinge_bundle(case, d)
@@ -118,23 +131,44 @@ def _planted(case, kind: str, stats: dict, noise: dict, s: float, sign: float):
                        spring_params=(ALPHA_HYST, 0.5 / z_max, 0.5 / z_max)), 0.0
     if kind == "time_delay":
         return replace(case, name=case.name + "_time_delay"), sign * s * sd_n / stats["link_velocity_rms_rad_s"]
+    rng = np.random.default_rng(np.random.SeedSequence([case.seed, 31, KINDS.index(kind)]))
+    if kind == "stribeck":
+        vs = float(np.exp(rng.uniform(np.log(0.005), np.log(0.1))))
+        excess = min(s * sd_n * case.k, case.c)
+        return replace(case, name=case.name + "_stribeck", friction_kind="stribeck",
+                       friction_params=(excess, vs, float(rng.choice([1.0, 2.0])))), 0.0
+    if kind == "friction_asymmetry":
+        w = rng.uniform(0.5, 1.0)
+        dc = min(w * s * sd_n * case.k, case.c / 2)
+        dv = min((1 - w) * s * sd_n * case.k / stats["link_velocity_rms_rad_s"], case.v / 2)
+        return replace(case, name=case.name + "_friction_asymmetry", friction_kind="asymmetric",
+                       friction_params=(sign * dc, sign * dv)), 0.0
+    if kind == "backlash":
+        return replace(case, name=case.name + "_backlash", backlash_rad=2 * s * sd_n), 0.0
+    if kind == "transmission_error":
+        w = rng.uniform(0.0, 1.0)
+        amps = (s * sd_n * math.sqrt(2 * w), s * sd_n * math.sqrt(2 * (1 - w)))
+        return replace(case, name=case.name + "_transmission_error", te_amplitudes_rad=amps,
+                       te_phases_rad=tuple(rng.uniform(0, 2 * np.pi, 2)), te_orders=(1.0, 2.0)), 0.0
     return case, 0.0
 
 
 def _models(truth: dict, case, delay_s: float):
     """(nominal JointModel: the truth without the effect, true JointModel: with it)."""
     from bench_discover_floor import true_model
-    from mocapfj.dynamics import BoucWen, CubicSpring
+    from mocapfj.dynamics import Backlash, BoucWen, CubicSpring
 
     nominal = true_model(truth)                     # the case's truth with its linear spring
+    spring = nominal.spring
     if case.spring == "cubic":
-        return nominal, nominal.with_(spring=CubicSpring(k1=case.k, k3=case.spring_params[0]))
+        spring = CubicSpring(k1=case.k, k3=case.spring_params[0])
     if case.spring == "bouc_wen":
         a, b, g = case.spring_params
-        return nominal, nominal.with_(spring=BoucWen(k=case.k, alpha=a, beta=b, gamma=g))
-    if delay_s:
-        return nominal, nominal.with_(delay_s=delay_s)
-    return nominal, nominal
+        spring = BoucWen(k=case.k, alpha=a, beta=b, gamma=g)
+    if case.backlash_rad > 0:
+        spring = Backlash(case.backlash_rad, spring)
+    return nominal, nominal.with_(spring=spring, delay_s=delay_s, transmission_error=case.transmission_error(),
+                                  friction=case.friction_element())
 
 
 def run_case(args) -> dict:
@@ -184,6 +218,13 @@ def _size(kind, case, delay):
         return {"alpha": case.spring_params[0], "beta": case.spring_params[1]}
     if kind == "time_delay":
         return {"delay_ms": 1e3 * delay}
+    if kind in ("stribeck", "friction_asymmetry"):
+        return dict(zip(("excess_Nm", "vs", "exponent") if kind == "stribeck" else ("dc_Nm", "dv_Nms"),
+                        case.friction_params))
+    if kind == "backlash":
+        return {"gap_mrad": 1e3 * case.backlash_rad}
+    if kind == "transmission_error":
+        return {"a1_urad": 1e6 * case.te_amplitudes_rad[0], "a2_urad": 1e6 * case.te_amplitudes_rad[1]}
     return {}
 
 
@@ -233,8 +274,11 @@ def main(argv=None) -> int:
     cases = sample_cases(args.n, args.base_seed)
     root = args.cache / str(args.base_seed)
     kinds = [k.strip() for k in args.kinds.split(",") if k.strip()]
-    rng = np.random.default_rng(args.base_seed)
-    jobs = [(c, k, root, float(rng.uniform(0.3, 0.8)), float(rng.choice([-1.0, 1.0]))) for c in cases for k in kinds]
+    jobs = []
+    for i, c in enumerate(cases):
+        for k in kinds:        # a kind's size depends on (seed, case, kind) alone
+            rng = np.random.default_rng(np.random.SeedSequence([args.base_seed, i, KINDS.index(k)]))
+            jobs.append((c, k, root, float(rng.uniform(0.3, 0.8)), float(rng.choice([-1.0, 1.0]))))
     tic = time.perf_counter()
     # one worker per case's kinds in order: the control bundle is written before the others use it
     with ProcessPoolExecutor(args.jobs) as ex:

@@ -204,9 +204,19 @@ class FlexibleJointModel:
         sol = root(residual, q_m.copy() if q_guess is None else np.asarray(q_guess, dtype=np.float64),
                    method="hybr", options={"xtol": 1e-15})
         scale = 1.0 + np.max(np.abs(self.holding_torque(sol.x)))
-        if np.max(np.abs(residual(sol.x))) > 1e-9 * scale:
-            raise RuntimeError(f"no static equilibrium found: {sol.message}")
-        return sol.x
+        if np.max(np.abs(residual(sol.x))) <= 1e-9 * scale:
+            return sol.x
+        if self.n_joints == 1:
+            # a spring with a flat stretch (free play) stalls hybr at q = q_m: bracket the one root
+            # instead (the spring torque falls as q rises past q_m; gravity changes slower)
+            f = lambda x: float(residual(np.array([x]))[0])      # noqa: E731
+            h = 1e-4
+            while f(q_m[0] - h) * f(q_m[0] + h) > 0:
+                h *= 2.0
+                if h > 1.0:
+                    raise RuntimeError(f"no static equilibrium found within 1 rad of q_m: {sol.message}")
+            return np.array([brentq(f, q_m[0] - h, q_m[0] + h, xtol=1e-15, rtol=1e-14)])
+        raise RuntimeError(f"no static equilibrium found: {sol.message}")
 
     def static_motor_angle(self, q, z=None) -> np.ndarray:
         """Motor angles q_m (n,) rad (link side) that hold the links at rest at q (n,) rad.

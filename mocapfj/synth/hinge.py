@@ -88,7 +88,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ..dynamics import PID, BoucWen, CoulombViscous, CubicSpring, LinearSpring, SingleJoint, simulate
+from ..dynamics import (PID, AsymmetricCoulombViscous, Backlash, BoucWen, CoulombViscous, CubicSpring, Drivetrain,
+                        LinearSpring, SingleJoint, Stribeck, TransmissionError, simulate)
 from ..errors import InputError
 from ..io import write_csv_columns, write_json, write_recording
 from ..rotations import rotate
@@ -97,13 +98,17 @@ from .scenario import reference_trajectory
 
 __all__ = ["HingeCase", "FAMILIES", "PARAMETER_NAMES", "simulate_hinge", "write_hinge_bundle", "sample_cases",
            "first_row_case", "small_grid", "fourier_from_peak", "pd_gains", "case_digest", "GENERATOR_VERSION",
-           "logged_torque", "dropout_mask", "with_spring", "SPRINGS"]
+           "logged_torque", "dropout_mask", "with_spring", "SPRINGS", "FRICTION_KINDS"]
 
 PARAMETER_NAMES = ("I", "mglx", "mgly", "c", "v", "J", "b", "k")
 FRICTION_LAWS = ("sign", "tanh")
 NOISE_KINDS = ("white", "coloured", "quantised")
 SPRINGS = {"linear": 0, "cubic": 1, "bouc_wen": 3}
 """Spring kinds and how many spring_params each takes."""
+FRICTION_KINDS = {"coulomb_viscous": 0, "stribeck": 3, "asymmetric": 2}
+"""Link friction kinds and how many friction_params each takes (see :class:`HingeCase`)."""
+_EFFECT_DEFAULTS = {"friction_kind": "coulomb_viscous", "friction_params": (), "backlash_rad": 0.0,
+                    "te_amplitudes_rad": (), "te_phases_rad": (), "te_orders": ()}
 
 FAMILIES = {
     # PA-10 joint 2, Lightcap and Banks (2007), Table I
@@ -166,6 +171,14 @@ class HingeCase:
         point_m (3,) : a point of the axis, m; mocap_zero_rad : rotation of the cluster at q = 0.
     Integration
         sim_max_step_s : LSODA's largest step (None: min(5 ms, 0.1 / fastest mode)); sim_rtol.
+    Effects beyond the linear joint (all off by default)
+        spring, spring_params : ``cubic`` (k3,) or ``bouc_wen`` (alpha, beta, gamma), see
+        :meth:`spring_element`; friction_kind, friction_params : ``coulomb_viscous`` (), ``stribeck``
+        (excess N m, vs rad/s, exponent): F = (c + excess exp(-|q'/vs|^exponent)) sgn(q') + v q',
+        or ``asymmetric`` (dc N m, dv N m s/rad): Coulomb c + dc and viscous v + dv for q' > 0,
+        c - dc and v - dv for q' < 0; backlash_rad : total free play in front of the spring, rad;
+        te_amplitudes_rad, te_phases_rad, te_orders : kinematic transmission error
+        e = sum a sin(n N q_m + phi), the spring seeing q_m + e - q and the motor (1 + e') tau_s.
     """
 
     name: str
@@ -221,6 +234,13 @@ class HingeCase:
     # spring (the joint's small-deflection stiffness is k in every case)
     spring: str = "linear"
     spring_params: tuple[float, ...] = ()
+    # further effects (left out of to_dict at their defaults, so older cases keep their digests)
+    friction_kind: str = "coulomb_viscous"
+    friction_params: tuple[float, ...] = ()
+    backlash_rad: float = 0.0
+    te_amplitudes_rad: tuple[float, ...] = ()
+    te_phases_rad: tuple[float, ...] = ()
+    te_orders: tuple[float, ...] = ()
 
     def __post_init__(self) -> None:
         for n in ("I", "J", "k", "gear_ratio", "f0_hz", "duration_s", "mocap_hz", "controller_hz", "kp",
@@ -235,6 +255,24 @@ class HingeCase:
             raise InputError(None, "HingeCase.spring", f"one of {sorted(SPRINGS)} with {SPRINGS} parameters",
                              (self.spring, self.spring_params))
         object.__setattr__(self, "spring_params", _tuple(self.spring_params, name="spring_params"))
+        if self.friction_kind not in FRICTION_KINDS or len(tuple(self.friction_params)) != FRICTION_KINDS[self.friction_kind]:
+            raise InputError(None, "HingeCase.friction_kind", f"one of {sorted(FRICTION_KINDS)} with "
+                             f"{FRICTION_KINDS} parameters", (self.friction_kind, self.friction_params))
+        object.__setattr__(self, "friction_params", _tuple(self.friction_params, name="friction_params"))
+        if self.friction_kind == "stribeck" and not (self.friction_params[1] > 0 and self.friction_params[2] > 0):
+            raise InputError(None, "HingeCase.friction_params", "a positive Stribeck velocity and exponent",
+                             self.friction_params)
+        if self.friction_kind == "asymmetric" and not (abs(self.friction_params[0]) <= self.c
+                                                       and abs(self.friction_params[1]) <= self.v):
+            raise InputError(None, "HingeCase.friction_params", "|dc| <= c and |dv| <= v", self.friction_params)
+        if not (math.isfinite(self.backlash_rad) and self.backlash_rad >= 0):
+            raise InputError(None, "HingeCase.backlash_rad", "a non-negative number", self.backlash_rad)
+        te = [_tuple(getattr(self, n), name=n) for n in ("te_amplitudes_rad", "te_phases_rad", "te_orders")]
+        if len({len(x) for x in te}) != 1:
+            raise InputError(None, "HingeCase.te_*", "amplitudes, phases and orders of equal length",
+                             [len(x) for x in te])
+        for n, x in zip(("te_amplitudes_rad", "te_phases_rad", "te_orders"), te):
+            object.__setattr__(self, n, x)
         if self.friction_law not in FRICTION_LAWS:
             raise InputError(None, "HingeCase.friction_law", f"one of {FRICTION_LAWS}", repr(self.friction_law))
         if self.friction_law == "tanh" and not self.eps_rad_s > 0:
@@ -312,11 +350,31 @@ class HingeCase:
             return BoucWen(k=self.k, alpha=a, beta=b, gamma=g)
         return LinearSpring(self.k)
 
+    def friction_element(self):
+        """The link friction, smoothed as integrated (see `friction_kind`)."""
+        eps = self.eps_rad_s if self.friction_law == "tanh" else self.sim_smoothing_rad_s
+        if self.friction_kind == "stribeck":
+            excess, vs, e = self.friction_params
+            return Stribeck(fc=self.c, fs=self.c + excess, vs=vs, fv=self.v, exponent=e, smoothing=eps)
+        if self.friction_kind == "asymmetric":
+            dc, dv = self.friction_params
+            return AsymmetricCoulombViscous(c_pos=self.c + dc, c_neg=self.c - dc, v_pos=self.v + dv,
+                                            v_neg=self.v - dv, smoothing=eps)
+        return CoulombViscous(self.c, self.v, smoothing=eps)
+
+    def transmission_error(self) -> TransmissionError | None:
+        if not self.te_amplitudes_rad:
+            return None
+        return TransmissionError(self.gear_ratio, self.te_amplitudes_rad, self.te_phases_rad, self.te_orders)
+
     def model(self) -> SingleJoint:
         """The true joint as a :class:`SingleJoint`, friction smoothed as integrated."""
-        eps = self.eps_rad_s if self.friction_law == "tanh" else self.sim_smoothing_rad_s
-        return SingleJoint(I=self.I, J=self.J, spring=self.spring_element(), mglx=self.mglx, mgly=self.mgly,
-                           b=self.b, friction=CoulombViscous(self.c, self.v, smoothing=eps), name="j1")
+        spring = self.spring_element()
+        if self.backlash_rad > 0:
+            spring = Backlash(self.backlash_rad, spring)
+        return SingleJoint(I=self.I, J=self.J, spring=spring, mglx=self.mglx, mgly=self.mgly,
+                           b=self.b, friction=self.friction_element(),
+                           drivetrain=Drivetrain(transmission_error=self.transmission_error()), name="j1")
 
     def natural_frequency_hz(self) -> float:
         """sqrt(k (1/I + 1/J)) / 2 pi, Hz: the motor and the link swinging against each other."""
@@ -339,7 +397,11 @@ class HingeCase:
         return r[:, None] * (np.cos(a)[:, None] * e1 + np.sin(a)[:, None] * e2) + h[:, None] * n
 
     def to_dict(self) -> dict:
-        return asdict(self)
+        d = asdict(self)
+        for n, v in _EFFECT_DEFAULTS.items():
+            if d[n] == v:
+                del d[n]
+        return d
 
 
 GENERATOR_VERSION = 2
@@ -402,7 +464,7 @@ def _pd_equilibrium(case: HingeCase) -> tuple[float, float]:
     for _ in range(100):
         g = -case.mglx * math.sin(q) + case.mgly * math.cos(q)
         qm = r - g / case.kp
-        q_new = qm - _spring_deflection(case, g)
+        q_new = qm + _te(case, qm) - _spring_deflection(case, g)
         if abs(q_new - q) < 1e-15:
             q = q_new
             break
@@ -411,8 +473,18 @@ def _pd_equilibrium(case: HingeCase) -> tuple[float, float]:
     return r - g / case.kp, q
 
 
+def _te(case: HingeCase, q_m: float) -> float:
+    te = case.transmission_error()
+    return 0.0 if te is None else float(te.error(q_m))
+
+
 def _spring_deflection(case: HingeCase, tau: float) -> float:
-    """The deflection at which the spring holds `tau` from rest (a Bouc-Wen spring's state 0)."""
+    """The deflection at which the spring holds `tau` from rest (a Bouc-Wen spring's state 0),
+    with the free play's half width on the side of `tau`."""
+    return _engaged_deflection(case, tau) + math.copysign(case.backlash_rad / 2, tau)
+
+
+def _engaged_deflection(case: HingeCase, tau: float) -> float:
     if case.spring == "bouc_wen":
         return tau / (case.spring_params[0] * case.k)
     d = tau / case.k

@@ -41,6 +41,21 @@ def test_static_deflection_is_gravity_over_k(q):
     assert m.static_link_angle(q_m)[0] == pytest.approx(q, abs=1e-12)
 
 
+def test_static_link_angle_with_free_play_near_rest():
+    """A dead zone of 1.56 mrad with the motor nearly at the gravity-free angle: the root solver
+    stalls in the flat stretch (a grid recording of the discovery benchmark); the bracket finds the
+    engaged side, where k (|delta| - gap/2) holds gravity."""
+    from mocapfj.dynamics import Backlash
+    gap, k = 1.5558e-3, 12383.64
+    m = SingleJoint(I=5.28, J=14.98, spring=Backlash(gap, LinearSpring(k)), mglx=117.2, mgly=-8.218)
+    q_m = np.array([0.00246635])
+    q = m.static_link_angle(q_m)[0]
+    g = -117.2 * np.sin(q) - 8.218 * np.cos(q)
+    delta = q_m[0] - q
+    assert abs(delta) > gap / 2
+    assert k * (delta - np.sign(delta) * gap / 2) == pytest.approx(g, rel=1e-9)
+
+
 def test_static_deflection_in_simulation_after_damping_out():
     m = joint(friction=CoulombViscous(c=0.0, v=6.0), d=40.0)
     q_m0 = 0.7

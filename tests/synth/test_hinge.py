@@ -191,3 +191,43 @@ def test_sampling_rules():
     assert all(20 - 0.05 <= c.duration_s <= 30.05 for c in grid)
     row = first_row_case(0)
     assert (row.I, row.k, row.mglx, row.duration_s, row.torque_noise_Nm) == (6.15, 1.19e4, 111.64, 40.0, 0.5)
+
+
+@pytest.mark.parametrize("effect", ["stribeck", "asymmetric", "backlash", "transmission_error"])
+def test_planted_effects_obey_their_own_equations(effect):
+    """Each further effect, written out here from its definition (not the dynamics library), holds
+    on the true signals; an effect left at its default leaves the case's digest as before."""
+    base = replace(first_row_case(5), duration_s=3.0, ramp_s=0.5)
+    kw = {"stribeck": dict(friction_kind="stribeck", friction_params=(3.0, 0.05, 1.0)),
+          "asymmetric": dict(friction_kind="asymmetric", friction_params=(2.0, -4.0)),
+          "backlash": dict(backlash_rad=4e-4),
+          "transmission_error": dict(te_amplitudes_rad=(6e-5, 3e-5), te_phases_rad=(0.4, 2.0),
+                                     te_orders=(1.0, 2.0))}[effect]
+    case = replace(base, **kw)
+    assert set(kw) <= set(case.to_dict()) and not set(kw) & set(base.to_dict())
+    _rec, truth = simulate_hinge(case)
+    s = truth["signals"]["controller"]
+    q, qd, q_m, tau = s["q"], s["qd"], s["q_m"], s["tau_s"]
+    eps = case.sim_smoothing_rad_s
+    sg = np.tanh(qd / eps)
+    delta = q_m - q
+    if effect == "transmission_error":
+        (a1, a2), (p1, p2) = case.te_amplitudes_rad, case.te_phases_rad
+        th = case.gear_ratio * q_m
+        delta = delta + a1 * np.sin(th + p1) + a2 * np.sin(2 * th + p2)
+    if effect == "backlash":
+        delta = np.sign(delta) * np.maximum(np.abs(delta) - 2e-4, 0.0)
+        assert np.mean(np.abs(q_m - q) < 2e-4) > 0.005           # the free play is crossed
+    assert np.max(np.abs(tau - case.k * delta)) < 1e-9 * case.k
+    extra = np.zeros_like(qd)
+    if effect == "stribeck":
+        extra = 3.0 * np.exp(-np.abs(qd / 0.05)) * sg
+    if effect == "asymmetric":
+        extra = np.where(qd >= 0, 1.0, -1.0) * (2.0 * sg - 4.0 * qd)
+    link = (case.I * np.gradient(qd, s["t"]) - case.mglx * np.sin(q) + case.mgly * np.cos(q) + case.c * sg
+            + case.v * qd - tau)
+    ok = (np.abs(qd) > 50 * eps) & (np.arange(qd.size) > 5) & (np.arange(qd.size) < qd.size - 5)
+    rms = np.sqrt(np.mean((link + extra)[ok] ** 2))
+    assert rms < 5e-3 * np.sqrt(np.mean(s["u"] ** 2))
+    if effect in ("stribeck", "asymmetric"):                       # and the effect is there
+        assert np.sqrt(np.mean(link[ok] ** 2)) > 3 * rms
