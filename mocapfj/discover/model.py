@@ -175,38 +175,48 @@ class OutputError:
                 "deflection_full_band": self.fit_full_delta, "torque_full_band": self.fit_full_u}
 
 
-def _plain_link(model: JointModel, t, drive):
-    """(q_sim, u_sim) by the compiled link kernel (:func:`mocapfj.dynamics.link_response.link_response`,
-    exact in the Coulomb law, 100x faster than integrating the general model) when the model is
-    what it runs: Coulomb-viscous friction, a linear (no offset) or cubic spring, no drivetrain
-    term; None otherwise. The motor's velocity and acceleration are the cubic spline's of `drive`,
-    as the general path's."""
+def _plain_link(model: JointModel, t, drive, d_span: float):
+    """(q_sim, u_sim) by a compiled link kernel when the model is what one runs, None otherwise:
+    :func:`mocapfj.dynamics.link_response.link_response` for the plain joint (Coulomb-viscous
+    friction, a linear (no offset) or cubic spring, no drivetrain term), exact in the Coulomb law
+    and 100x faster than integrating the general model;
+    :func:`mocapfj.dynamics.link_forward.link_forward` for the effects discovery names
+    (direction-dependent and Stribeck friction, piecewise, Bouc-Wen and free-play springs, a
+    transmission error, a drive gain). The motor's velocity and acceleration are the cubic
+    spline's of `drive`, as the general path's; `d_span` rad bounds the deflections met (for the
+    kernel's substeps)."""
     from scipy.interpolate import CubicSpline
 
     from ..dynamics import CoulombViscous, CubicSpring, LinearSpring
+    from ..dynamics.link_forward import encode_friction, encode_spring, link_forward
     from ..dynamics.link_response import link_response
 
     fr, sp = model.friction, model.spring
-    if (type(fr) is not CoulombViscous or model.transmission_error is not None or model.position_torque is not None
-            or model.torque_gain != 1.0 or model.coupling):
-        return None
-    if type(sp) is LinearSpring and sp.offset == 0.0:
-        k, k3 = sp.k, 0.0
-    elif type(sp) is CubicSpring and sp.k3 >= 0.0:
-        k, k3 = sp.k1, sp.k3
-    else:
-        return None
-    if not (model.I > 0 and k > 0 and fr.c >= 0 and fr.v >= 0 and fr.smoothing >= 0):
+    if model.position_torque is not None or model.coupling:
         return None
     fs = 1.0 / float(np.median(np.diff(t)))
-    if np.abs(np.diff(t) * fs - 1.0).max() > 1e-6:
+    if np.abs(np.diff(t) * fs - 1.0).max() > 1e-6 or not model.I > 0:
+        return None
+    plain = (type(fr) is CoulombViscous and model.transmission_error is None and model.torque_gain == 1.0
+             and ((type(sp) is LinearSpring and sp.offset == 0.0) or (type(sp) is CubicSpring and sp.k3 >= 0.0)))
+    if plain:
+        k, k3 = (sp.k, 0.0) if type(sp) is LinearSpring else (sp.k1, sp.k3)
+        if not (k > 0 and fr.c >= 0 and fr.v >= 0 and fr.smoothing >= 0):
+            return None
+    elif encode_friction(fr) is None or encode_spring(sp) is None:
         return None
     spline = CubicSpline(t, drive)
     qd, qdd = spline(t, 1), spline(t, 2)
-    q_sim, _ = link_response(drive, fs, I=model.I, mglx=model.mglx, mgly=model.mgly, c=fr.c, v=fr.v, k=k,
-                             eps=fr.smoothing, k3=k3, qd_m=qd)
-    u_sim = model.J * qdd + model.b * qd + sp.torque(drive - q_sim)
-    return q_sim, u_sim
+    if plain:
+        q_sim, _ = link_response(drive, fs, I=model.I, mglx=model.mglx, mgly=model.mgly, c=fr.c, v=fr.v,
+                                 k=k, eps=fr.smoothing, k3=k3, qd_m=qd)
+        return q_sim, model.J * qdd + model.b * qd + sp.torque(drive - q_sim)
+    sj = model.single_joint(smoothing=1e-6)
+    q0 = float(sj.static_link_angle(np.array([drive[0]]))[0])
+    q_sim, _, tau = link_forward(drive, fs, I=model.I, mglx=model.mglx, mgly=model.mgly, friction=fr, spring=sp,
+                                 transmission_error=model.transmission_error, qd_m=qd, q0=q0, d_span=d_span)
+    gain = 1.0 if model.transmission_error is None else 1.0 + model.transmission_error.derivative(drive)
+    return q_sim, (model.J * qdd + model.b * qd + gain * tau) / model.torque_gain
 
 
 def simulate_joint(model: JointModel, t, q, q_m, u, others_qdd: dict | None = None, *, trim_s: float = 1.0,
@@ -241,7 +251,7 @@ def simulate_joint(model: JointModel, t, q, q_m, u, others_qdd: dict | None = No
     # the motor angle drives the link without the encoder noise that would ring it where the real
     # link, driven by the true motion, does not (mocapfj.ident.output_error.wiener_drive)
     drive = wiener_drive(q_m, fs)
-    fast = _plain_link(model, t, drive) if ext is None else None
+    fast = _plain_link(model, t, drive, 2.0 * float(np.nanmax(np.abs(q_m - q)))) if ext is None else None
     if fast is not None:
         q_sim, u_sim = fast
     else:

@@ -208,40 +208,62 @@ _Z_MAX = 1e12
 """Largest Bouc-Wen state magnitude bouc_wen_states returns (a diverging trial law is held there)."""
 
 
+_BW_KERNEL = None
+
+
+def _bw_kernel():
+    """The compiled state recursion (numba, imported on first use): a sequential recursion has no
+    vector form, and numpy would run it as a Python loop (20 ms per 2000 samples, run hundreds
+    of times per fit)."""
+    global _BW_KERNEL
+    if _BW_KERNEL is None:
+        from numba import njit
+
+        @njit(cache=True)
+        def run(delta, A, beta, gamma, z0, zmax):  # pragma: no cover - compiled
+            T = delta.shape[0]
+            z = np.empty(T)
+            z[0] = zc = z0
+            for i in range(T - 1):
+                dlt = delta[i + 1] - delta[i]
+                s = 1.0 if dlt > 0 else -1.0
+                rem = dlt
+                for _ in range(2):                   # at most one sign change of z per step
+                    lam = beta * s + (gamma if (zc > 0 or (zc == 0 and s > 0)) else -gamma)
+                    zi = 0.0
+                    if abs(lam) < 1e-12:
+                        zn = zc + A * rem
+                    else:
+                        zi = A / lam
+                        zn = zi + (zc - zi) * math.exp(min(-lam * rem, 50.0))
+                        zn = min(max(zn, -zmax), zmax)
+                    if zc * zn < 0:                  # crossed 0: distance to it, then the other law
+                        if abs(lam) < 1e-12:
+                            used = -zc / A
+                        else:
+                            used = -math.log(zi / (zi - zc)) / lam
+                        rem -= used
+                        zc = 0.0
+                        continue
+                    zc = zn
+                    break
+                z[i + 1] = zc
+            return z
+
+        _BW_KERNEL = run
+    return _BW_KERNEL
+
+
 def bouc_wen_states(delta, A: float, beta: float, gamma: float, z0: float = 0.0) -> np.ndarray:
     """Bouc-Wen state z (T,) rad (n = 1) along delta (T,) rad, linear between samples, exactly.
 
     On a step of sign s, dz/d(delta) = A - lam z with lam = beta s + gamma (z >= 0) or
-    beta s - gamma (z < 0); solved in closed form, switching law where z crosses 0.
+    beta s - gamma (z < 0); solved in closed form, switching law where z crosses 0. A softening
+    law (lam < 0) grows z without bound: it is held at +-1e12 (a residual the fit rejects) rather
+    than overflowing. Compiled (numba).
     """
-    D = np.diff(np.asarray(delta, dtype=np.float64)).tolist()
-    z = np.empty(len(D) + 1)
-    z[0] = zc = float(z0)
-    for i, dlt in enumerate(D):
-        s = 1.0 if dlt > 0 else -1.0
-        rem = dlt
-        for _ in range(2):                           # at most one sign change of z per step
-            lam = beta * s + (gamma if (zc > 0 or (zc == 0 and s > 0)) else -gamma)
-            if abs(lam) < 1e-12:
-                zn = zc + A * rem
-            else:
-                zi = A / lam
-                # a softening law (lam < 0) grows z without bound: held at +-Z_MAX (a residual
-                # the fit rejects) rather than overflowing
-                zn = zi + (zc - zi) * math.exp(min(-lam * rem, 50.0))
-                zn = min(max(zn, -_Z_MAX), _Z_MAX)
-            if zc * zn < 0:                          # crossed 0: distance to it, then the other law
-                if abs(lam) < 1e-12:
-                    used = -zc / A
-                else:
-                    used = -np.log(zi / (zi - zc)) / lam
-                rem -= used
-                zc = 0.0
-                continue
-            zc = zn
-            break
-        z[i + 1] = zc
-    return z
+    d = np.ascontiguousarray(delta, dtype=np.float64)
+    return _bw_kernel()(d, float(A), float(beta), float(gamma), float(z0), _Z_MAX)
 
 
 def bouc_wen_path(delta, A: float, beta: float, gamma: float, stride: int = 1) -> np.ndarray:

@@ -1,0 +1,313 @@
+"""The link of one flexible joint under a prescribed motor motion, for any joint model discovery
+builds: the compiled forward simulation behind :func:`mocapfj.discover.simulate_joint`.
+
+:mod:`.link_response` integrates the plain joint (Coulomb-viscous friction, linear or cubic
+spring) with parameter sensitivities for output-error identification. Discovery also simulates
+the joint with the effects it names, and integrating those with LSODA and a Python right-hand
+side took 20-60 s per 60 s recording, or, with a narrow Bouc-Wen loop whose stiff state equation
+LSODA probes with wild trial steps, did not finish. This kernel runs the same scheme (Stormer-
+Verlet with the friction law set-valued, module docstring of :mod:`.link_response`) with
+
+- friction: Coulomb and viscous coefficients per direction of motion plus a Stribeck excess
+  s exp(-(|q'|/vs)^x) per direction (:class:`.CoulombViscous`, :class:`.AsymmetricCoulombViscous`,
+  :class:`.Stribeck`, :class:`.AsymmetricStribeck`). Under the sign law the link sticks while the
+  net torque is below the breakaway level c + s of the direction it would move in; while it
+  slides, the Stribeck excess is taken at the substep's starting speed (first order in it, exact
+  in the rest);
+- springs: linear with offset, cubic, three-piece (:class:`.PiecewiseSpring`), Bouc-Wen with
+  n = 1 (:class:`.BoucWen`), each optionally behind free play (:class:`.Backlash`). The Bouc-Wen
+  state is advanced exactly along the deflection's path between substep midpoints (the state
+  equation is linear in z on each side of z = 0 when n = 1, so each piece is an exponential);
+- a kinematic transmission error e(q_m) (:class:`.TransmissionError`), evaluated at every
+  substep's motor angle: the spring sees q_m + e - q.
+
+It returns q, q' and the spring torque at the samples; the motor equation then gives u.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ..errors import InputError
+from .drivetrain import TransmissionError
+from .friction import AsymmetricCoulombViscous, AsymmetricStribeck, CoulombViscous, Stribeck
+from .hysteresis import BoucWen
+from .link_response import substeps
+from .springs import Backlash, CubicSpring, LinearSpring, PiecewiseSpring
+
+__all__ = ["link_forward", "encode_friction", "encode_spring"]
+
+_KERNEL = None
+SPRING_POLY, SPRING_PIECEWISE, SPRING_BOUC_WEN = 0, 1, 2
+
+
+def encode_friction(fr) -> np.ndarray | None:
+    """(10,) c_pos, c_neg, v_pos, v_neg, s_pos, s_neg, vs_pos, vs_neg, exponent, eps of a friction
+    law the kernel runs, or None."""
+    eps = float(getattr(fr, "smoothing", 0.0) or 0.0)
+    t = type(fr)
+    if t is CoulombViscous:
+        a = (fr.c, fr.c, fr.v, fr.v, 0.0, 0.0, 1.0, 1.0, 2.0)
+    elif t is AsymmetricCoulombViscous:
+        a = (fr.c_pos, fr.c_neg, fr.v_pos, fr.v_neg, 0.0, 0.0, 1.0, 1.0, 2.0)
+    elif t is Stribeck:
+        a = (fr.fc, fr.fc, fr.fv, fr.fv, fr.fs - fr.fc, fr.fs - fr.fc, fr.vs, fr.vs, fr.exponent)
+    elif t is AsymmetricStribeck:
+        a = (fr.fc_pos, fr.fc_neg, fr.fv_pos, fr.fv_neg, fr.fs_pos - fr.fc_pos, fr.fs_neg - fr.fc_neg, fr.vs_pos,
+             fr.vs_neg, fr.exponent)
+    else:
+        return None
+    a = np.array(a + (eps,), dtype=np.float64)
+    if not (np.isfinite(a).all() and (a[:4] >= 0).all() and (a[6:8] > 0).all() and a[8] >= 1.0 and eps >= 0
+            and (a[:2] + a[4:6] >= 0).all()):
+        return None
+    return a
+
+
+def encode_spring(sp) -> tuple[int, np.ndarray, float] | None:
+    """(kind, params (6,), gap) of a spring the kernel runs, or None."""
+    gap = 0.0
+    if type(sp) is Backlash:
+        gap, sp = float(sp.gap), sp.spring
+    t = type(sp)
+    if t is LinearSpring:
+        kind, p = SPRING_POLY, (sp.k, 0.0, sp.offset)
+    elif t is CubicSpring:
+        kind, p = SPRING_POLY, (sp.k1, sp.k3, 0.0)
+    elif t is PiecewiseSpring:
+        kind, p = SPRING_PIECEWISE, (sp.k1, sp.k2, sp.k3, *sp.breakpoints)
+    elif t is BoucWen and sp.n == 1.0:
+        kind, p = SPRING_BOUC_WEN, (sp.k, sp.alpha, sp.beta, sp.gamma, sp.A)
+    else:
+        return None
+    p = np.array(p + (0.0,) * (6 - len(p)), dtype=np.float64)
+    if not (np.isfinite(p).all() and p[0] > 0 and math.isfinite(gap)):
+        return None
+    return kind, p, gap
+
+
+def _engaged_py(d, gap):  # pragma: no cover - compiled
+    if gap <= 0.0:
+        return d
+    hg = 0.5 * gap
+    if d > hg:
+        return d - hg
+    if d < -hg:
+        return d + hg
+    return 0.0
+
+def _bouc_wen_step_py(z, d0, d1, beta, gamma, A):  # pragma: no cover - compiled
+    """z after the (engaged) deflection moves linearly from d0 to d1 (n = 1, exact)."""
+    x = abs(d1 - d0)
+    if x == 0.0:
+        return z
+    s = 1.0 if d1 > d0 else -1.0
+    y = s * z                                    # the state in the direction of motion
+    lam = beta + gamma
+    kap = gamma - beta
+    while x > 0.0:
+        if y >= 0.0:                             # loading: dy/dx = A - lam y
+            yi = A / lam
+            y = yi + (y - yi) * math.exp(-lam * x)
+            x = 0.0
+        else:                                    # unloading: dy/dx = A + kap y, up to y = 0
+            if abs(kap) * x < 1e-12:
+                x0 = -y / A
+            else:
+                arg = A + kap * y
+                x0 = math.log(A / arg) / kap if arg > 0.0 else np.inf
+            if x0 >= x:
+                if abs(kap) * x < 1e-12:
+                    y = y + A * x
+                else:
+                    y = (y + A / kap) * math.exp(kap * x) - A / kap
+                x = 0.0
+            else:
+                y = 0.0
+                x -= x0
+    return s * y
+
+def _spring_torque_py(kind, P, gap, d, z):  # pragma: no cover - compiled
+    e = _engaged(d, gap)
+    if kind == 0:
+        return P[0] * (e - P[2]) + P[1] * e * e * e
+    if kind == 1:
+        a = abs(e)
+        sg = 1.0 if e >= 0.0 else -1.0
+        th1 = P[3]
+        th2 = P[4]
+        if a <= th1:
+            return sg * P[0] * a
+        tau1 = P[0] * th1
+        if a <= th2:
+            return sg * (tau1 + P[1] * (a - th1))
+        return sg * (tau1 + P[1] * (th2 - th1) + P[2] * (a - th2))
+    return P[0] * (P[1] * e + (1.0 - P[1]) * z)
+
+def _te_value_py(qm, N, amps, phases, orders):  # pragma: no cover - compiled
+    s = 0.0
+    for j in range(amps.shape[0]):
+        s += amps[j] * math.sin(orders[j] * N * qm + phases[j])
+    return s
+
+def _run_py(q_m, qd_m, dt, n_sub, I, mglx, mgly, fr, kind, P, gap, N, amps, phases, orders, q0, w0):  # pragma: no cover
+    T = q_m.shape[0]
+    q_out = np.empty(T)
+    w_out = np.empty(T)
+    tau_out = np.empty(T)
+    h = dt / n_sub
+    eps = fr[9]
+    expo = fr[8]
+    if eps > 0.0 and h * max(fr[0] + fr[4], fr[1] + fr[5]) > eps * I:
+        eps = 0.0                                # stiffer than the step resolves: sign
+    bw = kind == 2
+    q = q0
+    w = w0
+    z = 0.0
+    d_prev = _engaged(q_m[0] + _te_value(q_m[0], N, amps, phases, orders) - q, gap)
+    q_out[0] = q
+    w_out[0] = w
+    tau_out[0] = _spring_torque(kind, P, gap, q_m[0] + _te_value(q_m[0], N, amps, phases, orders) - q, z)
+    for i in range(1, T):
+        a = q_m[i - 1]
+        b = q_m[i]
+        ma = qd_m[i - 1] * dt
+        mb = qd_m[i] * dt
+        for s in range(n_sub):
+            x = (s + 0.5) / n_sub
+            x2 = x * x
+            x3 = x2 * x
+            qm = ((2 * x3 - 3 * x2 + 1) * a + (x3 - 2 * x2 + x) * ma + (-2 * x3 + 3 * x2) * b + (x3 - x2) * mb)
+            qmt = qm + _te_value(qm, N, amps, phases, orders)
+            qmid = q + 0.5 * h * w
+            dl = qmt - qmid
+            if bw:
+                de = _engaged(dl, gap)
+                z = _bouc_wen_step(z, d_prev, de, P[2], P[3], P[4])
+                d_prev = de
+            F = _spring_torque(kind, P, gap, dl, z) + mglx * math.sin(qmid) - mgly * math.cos(qmid)
+            p = I * w + h * F                    # momentum without friction
+            if eps > 0.0:
+                # I w1 + h fr((w + w1) / 2) = p, fr(x) = C(x) tanh(x / eps) + V(x) x: Newton
+                w1 = w
+                for _ in range(60):
+                    wf = 0.5 * (w + w1)
+                    j = 0 if wf >= 0.0 else 1
+                    r = (abs(wf) / fr[6 + j]) ** expo
+                    ex = math.exp(-r)
+                    C = fr[j] + fr[4 + j] * ex
+                    dC = 0.0
+                    if fr[4 + j] != 0.0 and wf != 0.0:
+                        dC = -fr[4 + j] * ex * expo * r / wf
+                    th = math.tanh(wf / eps)
+                    g = I * w1 + h * (C * th + fr[2 + j] * wf) - p
+                    dg = I + 0.5 * h * (C * (1.0 - th * th) / eps + fr[2 + j] + dC * th)
+                    if dg < 0.5 * I:
+                        dg = 0.5 * I
+                    dw1 = g / dg
+                    w1 -= dw1
+                    if abs(dw1) <= 1e-12 * (abs(w1) + eps):
+                        break
+                q = qmid + 0.5 * h * w1
+                w = w1
+            elif w != 0.0:
+                sg = 1.0 if w > 0.0 else -1.0
+                j = 0 if w > 0.0 else 1
+                C = fr[j] + fr[4 + j] * math.exp(-(abs(w) / fr[6 + j]) ** expo)
+                mass = I + 0.5 * h * fr[2 + j]
+                w1 = (p - 0.5 * h * fr[2 + j] * w - sg * h * C) / mass
+                if w1 * sg >= 0.0:               # slides one way all along
+                    q = qmid + 0.5 * h * w1
+                    w = w1
+                else:                            # reaches rest within the step
+                    frac = w / (w - w1)
+                    h2 = h * (1.0 - frac)
+                    q_stop = q + 0.5 * h * frac * w
+                    F2 = (_spring_torque(kind, P, gap, qmt - q_stop, z) + mglx * math.sin(q_stop)
+                          - mgly * math.cos(q_stop))
+                    j2 = 0 if F2 > 0.0 else 1
+                    static = fr[j2] + fr[4 + j2]
+                    if abs(F2) <= static:        # sticks
+                        w = 0.0
+                        q = q_stop
+                    else:                        # turns: the friction flips at the stop
+                        sg2 = 1.0 if F2 > 0.0 else -1.0
+                        w = h2 * (F2 - sg2 * static) / (I + 0.5 * h2 * fr[2 + j2])
+                        q = q_stop + 0.5 * h2 * w
+            else:                                # at rest: sticks or breaks away
+                j = 0 if F > 0.0 else 1
+                static = fr[j] + fr[4 + j]
+                if abs(F) > static:
+                    sg = 1.0 if F > 0.0 else -1.0
+                    w = h * (F - sg * static) / (I + 0.5 * h * fr[2 + j])
+                    q = q + 0.5 * h * w
+        q_out[i] = q
+        w_out[i] = w
+        dl = b + _te_value(b, N, amps, phases, orders) - q
+        zz = _bouc_wen_step(z, d_prev, _engaged(dl, gap), P[2], P[3], P[4]) if bw else z
+        tau_out[i] = _spring_torque(kind, P, gap, dl, zz)
+    return q_out, w_out, tau_out
+
+
+_engaged = _bouc_wen_step = _spring_torque = _te_value = None    # compiled by _kernel()
+
+
+def _kernel():
+    """The compiled kernel (numba is imported on first use). The helpers are module globals
+    compiled here, so that numba's on-disk cache holds (it misses on closures)."""
+    global _KERNEL, _engaged, _bouc_wen_step, _spring_torque, _te_value
+    if _KERNEL is not None:
+        return _KERNEL
+    from numba import njit
+
+    _engaged = njit(cache=True, inline="always")(_engaged_py)
+    _bouc_wen_step = njit(cache=True)(_bouc_wen_step_py)
+    _spring_torque = njit(cache=True)(_spring_torque_py)
+    _te_value = njit(cache=True)(_te_value_py)
+    _KERNEL = njit(cache=True)(_run_py)
+    return _KERNEL
+
+
+def link_forward(q_m, fs_hz: float, *, I: float, mglx: float, mgly: float, friction, spring,
+                 transmission_error: TransmissionError | None = None, qd_m=None, q0: float, w0: float | None = None,
+                 d_span: float = 0.0, max_phase: float = 0.05):
+    """(q (T,) rad, q' (T,) rad/s, tau_s (T,) N m) of the link under the motor angle q_m (T,) rad
+    sampled at fs_hz, starting at q0 (a static equilibrium: ``SingleJoint.static_link_angle``)
+    with velocity w0 (default the motor's) and a virgin spring state. `friction` and `spring` are
+    elements of :mod:`.friction` and :mod:`.springs` / :mod:`.hysteresis` (module docstring for
+    the ones it runs); `d_span` rad bounds the deflections met (the spring's largest slope
+    up to it sets the substeps, :func:`.link_response.substeps`). Raises InputError for an element it does
+    not run and RuntimeError when the integration leaves the finite numbers."""
+    q_m = np.ascontiguousarray(q_m, dtype=np.float64)
+    if q_m.ndim != 1 or q_m.size < 3 or not np.isfinite(q_m).all():
+        raise InputError(None, "q_m", "a finite (T,) motor angle with T >= 3", q_m.shape)
+    fr, sp = encode_friction(friction), encode_spring(spring)
+    if fr is None or sp is None:
+        raise InputError(None, "friction/spring", "elements link_forward runs (mocapfj.dynamics.link_forward)",
+                         f"{type(friction).__name__}, {type(spring).__name__}")
+    if not (I > 0 and math.isfinite(I) and math.isfinite(mglx) and math.isfinite(mgly) and math.isfinite(q0)):
+        raise InputError(None, "I, mglx, mgly, q0", "finite numbers, I > 0", (I, mglx, mgly, q0))
+    kind, P, gap = sp
+    qd_m = np.gradient(q_m) * fs_hz if qd_m is None else np.ascontiguousarray(qd_m, dtype=np.float64)
+    dt = 1.0 / fs_hz
+    if kind == SPRING_POLY:
+        k = float(P[0] + max(0.0, 3.0 * P[1] * d_span ** 2))
+    elif kind == SPRING_PIECEWISE:
+        k = float(P[:3].max())
+    else:
+        k = float(P[0] * (P[1] + (1.0 - P[1]) * P[4]))
+    if transmission_error is not None:
+        te = transmission_error
+        N, amps, phases, orders = (float(te.gear_ratio), np.asarray(te.amplitudes, dtype=np.float64),
+                                   np.asarray(te.phases, dtype=np.float64), np.asarray(te.orders, dtype=np.float64))
+    else:
+        N, amps, phases, orders = 1.0, np.zeros(0), np.zeros(0), np.zeros(0)
+    n_sub = substeps(I, k, dt, max_phase)
+    q, w, tau = _kernel()(q_m, qd_m, dt, n_sub, float(I), float(mglx), float(mgly), fr, int(kind), P, float(gap), N,
+                          amps, phases, orders, float(q0), float(qd_m[0] if w0 is None else w0))
+    if not (np.isfinite(q).all() and np.isfinite(tau).all()):
+        raise RuntimeError("the link simulation left the finite numbers (a spring or friction law without a "
+                           "stable motion under this motor trajectory)")
+    return q, w, tau
