@@ -314,10 +314,20 @@ def _fits(before, after) -> dict:
     return {"before": before.summary(), "after": after.summary()}
 
 
+def _nominal_sim(model, s: JointSignals, others: dict):
+    """The nominal model's output-error comparison; a model that cannot be simulated on the
+    recording is bad input (one line), not a traceback."""
+    try:
+        return simulate_joint(model, s.t, s.q, s.q_m, s.u, others)
+    except RuntimeError as e:
+        raise InputError(None, f"model.joints[{model.name}]", "a nominal model that can be simulated under the "
+                         "recorded motor angle", " ".join(str(e).split())[:200]) from None
+
+
 def _prove(model, steps: list, s: JointSignals, others: dict):
     """Output-error fits of `model` and of each model of `steps` in turn (the model after each
     step of the search): (before, after, [fit gain % of each step])."""
-    before = simulate_joint(model, s.t, s.q, s.q_m, s.u, others)
+    before = _nominal_sim(model, s, others)
     prev, gains = before, []
     for m in steps:
         # in the nominal model's band: fits in different bands are not comparable
@@ -365,7 +375,7 @@ def _reidentification(jn, s, nominal, current, found, rejected, held_out, on_val
         data, train, where = segment(s, 1.0 - holdout, 1.0), segment(s, 0.0, 1.0 - holdout), "trial's held-out part"
         m = (s.t >= data.t[0]) & (s.t <= data.t[-1])
         others = {k: v[m] for k, v in others_trial.items()}
-        chain = [simulate_joint(nominal, data.t, data.q, data.q_m, data.u, others)]
+        chain = [_nominal_sim(nominal, data, others)]
         for st in _steps(found, jn)[0]:
             chain.append(simulate_joint(st, data.t, data.q, data.q_m, data.u, others, band_hz=chain[0].band_hz))
     band = chain[0].band_hz
@@ -510,7 +520,7 @@ def discover(signals: dict, models: dict, *, fs_hz: float, validation: dict | No
             on_valid = validation is not None and jn in validation
             data = validation[jn] if on_valid else signals[jn]
             others = {k: v for k, v in (vq if on_valid else qdd).items() if k != jn}
-            oe = simulate_joint(current[jn], data.t, data.q, data.q_m, data.u, others)
+            oe = _nominal_sim(current[jn], data, others)
             held[jn] = (data, others, "validation recording" if on_valid else "trial", [oe])
         return held[jn]
 

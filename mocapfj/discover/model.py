@@ -256,7 +256,8 @@ def simulate_joint(model: JointModel, t, q, q_m, u, others_qdd: dict | None = No
         q_sim, u_sim = fast
     else:
         res = simulate(model.single_joint(), t, PrescribedMotor.from_samples(t, drive),
-                       tau_ext=coupling_torque if ext is not None else None, rtol=rtol, atol=atol)
+                       tau_ext=coupling_torque if ext is not None else None, rtol=rtol, atol=atol,
+                       max_evals=20 * t.size)
         q_sim, u_sim = res.q[:, 0], res.u[:, 0]
     if model.delay_s:
         q_sim = shift_signal(t, q_sim, -model.delay_s)        # mocap stamps are late: it saw q(t + delay)

@@ -166,7 +166,7 @@ def _initial(x, default, n, name):
 
 def simulate(model: FlexibleJointModel, t, drive, *, q0=None, qd0=None, q_m0=None, qd_m0=None, z0=None,
              tau_ext: Callable | None = None, method: str = "LSODA", rtol: float = 1e-8, atol: float = 1e-10,
-             max_step: float | None = None) -> SimulationResult:
+             max_step: float | None = None, max_evals: int | None = None) -> SimulationResult:
     """Simulate `model` driven by `drive`, returning the states and torques at times `t`.
 
     Parameters
@@ -188,6 +188,9 @@ def simulate(model: FlexibleJointModel, t, drive, *, q0=None, qd0=None, q_m0=Non
     method, rtol, atol : solve_ivp settings ('LSODA', 'Radau', 'BDF' for stiff models).
     max_step : float or None
         Largest step, s; default the median output interval.
+    max_evals : int or None
+        Right-hand-side evaluations allowed; beyond them (or at a non-finite derivative) a
+        RuntimeError instead of an integration that does not end (a stiff or diverging model).
     """
     t = np.asarray(t, dtype=np.float64)
     if t.ndim != 1 or t.size < 2 or not (np.diff(t) > 0).all():
@@ -236,6 +239,19 @@ def simulate(model: FlexibleJointModel, t, drive, *, q0=None, qd0=None, q_m0=Non
         def rhs(ti, x):
             return model.state_derivative(x, _eval(drive.torque_fn, ti, n), ext(ti))
         x0 = np.concatenate([q0, qd0, qm0, qdm0, z0])
+
+    if max_evals is not None:
+        inner, count = rhs, [0]
+
+        def rhs(ti, x):                      # noqa: F811 - the same derivative, with a budget
+            count[0] += 1
+            if count[0] > max_evals:
+                raise RuntimeError(f"simulation stopped at t = {ti:.6g} s after {max_evals} derivative evaluations "
+                                   "(a model too stiff or diverging under this drive)")
+            dx = inner(ti, x)
+            if not np.all(np.isfinite(dx)):
+                raise RuntimeError(f"simulation left the finite numbers at t = {ti:.6g} s")
+            return dx
 
     sol = solve_ivp(rhs, (t[0], t[-1]), x0, method=method, t_eval=t, rtol=rtol, atol=atol, max_step=max_step)
     if not sol.success:

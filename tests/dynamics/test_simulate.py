@@ -159,3 +159,16 @@ def test_prescribed_motor_from_samples_matches_the_function():
     t = np.linspace(0.1, 1.0, 451)
     a, b = simulate(model(), t, sampled), simulate(model(), t, PrescribedMotor(f))
     np.testing.assert_allclose(a.q, b.q, atol=1e-8)
+
+
+def test_an_evaluation_budget_stops_an_integration_that_would_not_end():
+    """A narrow Bouc-Wen loop on a stiff joint: with a budget of 200 evaluations the run stops with
+    a RuntimeError naming the budget, instead of running on."""
+    from mocapfj.dynamics import BoucWen, CoulombViscous, PrescribedMotor, SingleJoint, simulate
+
+    m = SingleJoint(I=6.15, J=12.57, spring=BoucWen(k=1.19e4, alpha=0.7, beta=5e4, gamma=5e4), mglx=111.6,
+                    friction=CoulombViscous(9.0, 18.0, smoothing=1e-3))
+    t = np.arange(0.0, 2.0, 1e-3)
+    drive = PrescribedMotor.from_samples(t, 0.5 * np.sin(2 * np.pi * 0.5 * t))
+    with pytest.raises(RuntimeError, match="200 derivative evaluations"):
+        simulate(m, t, drive, max_evals=200)
