@@ -24,6 +24,8 @@ shares no code with discovery's comparison or effect library). Each case is reco
 - ``transmission_error``: e = a1 sin(N q_m + phi1) + a2 sin(2 N q_m + phi2), phases U(0, 2 pi),
   RMS s x the deflection noise shared U(0, 1) between the orders.
 
+- ``two_effects``: two of the above at once (``PAIRS``), each sized as alone.
+
 A planted size that a cap cuts is reported (column ``size``).
 
 Each recording has a validation recording: the same joint and effect, a new excitation (new
@@ -71,7 +73,10 @@ sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "benchmarks"))
 
 KINDS = ("control", "stiffening", "hysteresis", "time_delay", "stribeck", "friction_asymmetry", "backlash",
-         "transmission_error")
+         "transmission_error", "two_effects")
+PAIRS = (("hysteresis", "friction_asymmetry"), ("stiffening", "time_delay"), ("transmission_error", "friction_asymmetry"),
+         ("backlash", "time_delay"), ("stiffening", "stribeck"), ("hysteresis", "time_delay"))
+"""The pairs ``two_effects`` plants, case i taking pair i mod 6, each effect sized on its own."""
 ALPHA_HYST = 0.7
 
 
@@ -117,8 +122,21 @@ def _write(case, d: Path, delay_s: float = 0.0) -> dict:
     return read_json(d / "truth.json")
 
 
+def _pair(case) -> tuple[str, str]:
+    return PAIRS[int(case.name.rsplit("_", 1)[1]) % len(PAIRS)]
+
+
 def _planted(case, kind: str, stats: dict, noise: dict, s: float, sign: float):
     """(case with the effect, delay s) sized as the module docstring says."""
+    if kind == "two_effects":
+        (a, b), delay = _pair(case), 0.0
+        for i, k in enumerate((a, b)):
+            planted, d = _planted(case, k, stats, noise, s, sign)
+            changes = {f: getattr(planted, f) for f in ("spring", "spring_params", "friction_kind", "friction_params",
+                                                        "backlash_rad", "te_amplitudes_rad", "te_phases_rad",
+                                                        "te_orders") if getattr(planted, f) != getattr(case, f)}
+            case, delay = replace(case, **changes), delay + d
+        return replace(case, name=case.name + "_two_effects"), delay
     sd_n = noise["deflection_noise_sd_rad"]
     if kind == "stiffening":
         sd_d = stats["deflection_std_rad"]
@@ -212,6 +230,9 @@ def run_case(args) -> dict:
 
 
 def _size(kind, case, delay):
+    if kind == "two_effects":
+        a, b = PAIRS[int(case.name.split("_")[2]) % len(PAIRS)]
+        return {**_size(a, case, delay), **_size(b, case, delay)}
     if kind == "stiffening":
         return {"k3": case.spring_params[0]}
     if kind == "hysteresis":
@@ -228,6 +249,10 @@ def _size(kind, case, delay):
     return {}
 
 
+def _pair_of_row(r: dict) -> tuple[str, str]:
+    return PAIRS[int(r["case"].rsplit("_", 1)[1]) % len(PAIRS)]
+
+
 def summarize(rows: list[dict]) -> list[str]:
     lines = []
     for kind in KINDS:
@@ -236,6 +261,11 @@ def summarize(rows: list[dict]) -> list[str]:
             continue
         ok = [r for r in rs if "error" not in r]
         first = [r["named"][0] if r["named"] else "none" for r in ok]
+        if kind == "two_effects":
+            both = [set(_pair_of_row(r)) <= set(r["named"]) for r in ok]
+            lines.append(f"{kind}: {len(rs)} cases, {len(rs) - len(ok)} errors; both found in {sum(both)}/{len(ok)}; "
+                         + "; ".join(f"{'+'.join(_pair_of_row(r))}: {','.join(r['named']) or 'none'}" for r in ok))
+            continue
         want = "none" if kind == "control" else kind
         hit = sum(f == want for f in first)
         lines.append(f"{kind}: {len(rs)} cases, {len(rs) - len(ok)} errors; named first as planted "

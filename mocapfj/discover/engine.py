@@ -361,9 +361,9 @@ def _reidentification(jn, s, nominal, current, found, rejected, held_out, on_val
       SD of that change the recording's noise gives, and beat the model the search found. The
       search's effects that the re-identified one replaces (the same name, a spring or a clock
       of its own) are rejected; the others are kept if they still raise the held-out fit on it.
-    - Otherwise the search's effects stand only if the model with them fits the held-out evidence
-      better than the re-identified one without any (else they followed the nominal model's
-      error); a nominal model with no effect found is replaced by the re-identified one when that
+    - Otherwise the search's effects stand unless the re-identified model without any fits the
+      held-out evidence better by more than GAIN_SDS x the SD of the difference (then they followed
+      the nominal model's error; a tie goes to the effect, which moves fewer parameters); a nominal model with no effect found is replaced by the re-identified one when that
       fits better by GAIN_SDS x its SD (the nominal parameters were off).
     """
     from .reident import segment, reidentify
@@ -461,12 +461,17 @@ def _reidentification(jn, s, nominal, current, found, rejected, held_out, on_val
                                             + ("" if gain > GAIN_SDS * sd else ": no more than the noise")
                                             + ("" if oe_mod.fit > oe_cur.fit else
                                                f"; below the model the search found ({oe_cur.fit:.2f} %)"))})
-    if mine and oe_base.fit > oe_cur.fit:
+    # the search's effects (a few parameters, the nominal ones held) against the re-identified
+    # nominal (all eight free): a tie goes to the effect, the fewer parameter changes; they are
+    # rejected only when the re-identification fits better by more than the noise allows
+    tie_sd = oe_cur.change_sd(oe_base) if mine else 0.0
+    report["fit_found_vs_reidentified_sd"] = tie_sd
+    if mine and oe_base.fit - oe_cur.fit > max(GAIN_MIN_POINTS, GAIN_SDS * tie_sd):
         for f in mine:
             rejected.append({"name": f["name"], "joint": jn, "parameters": f["candidate"].params,
                              "reason": f"the nominal parameters re-identified without it fit the {where} better "
-                                       f"({oe_base.fit:.2f} against {oe_cur.fit:.2f} %): it followed the nominal "
-                                       "model's error"})
+                                       f"({oe_base.fit:.2f} against {oe_cur.fit:.2f} %, noise SD of the difference "
+                                       f"{tie_sd:.2f}): it followed the nominal model's error"})
         found[:] = [f for f in found if f["joint"] != jn]
         current[jn] = R.base
         if on_valid:
