@@ -180,3 +180,41 @@ def test_the_sd_of_a_change_of_fit_matches_its_scatter_over_noise():
         g = noise_gain(fs, 5.0)
         sds.append(fit_change_sd(t, keep, 5.0, fa, [(a[0].sd_y, 2e-4 * np.sqrt(g), m_d), (a[1].sd_y, np.sqrt(g), m_u)]))
     assert np.std(changes) == pytest.approx(np.median(sds), rel=0.15)
+
+
+@pytest.mark.parametrize("effect", ["transmission_error", "backlash"])
+def test_grid_subset_an_effect_at_the_noise_is_named_and_recovers_the_gap(effect):
+    """The fast subset of benchmarks/bench_discover_grid.py: a PA-10 case of the independent hinge
+    simulator with a transmission error (RMS 0.6 x the deflection noise, orders 1 and 2) or free
+    play (total width 2 x 0.6 x the noise), the nominal its truth without the effect, a
+    validation recording with a new excitation: the effect is named first and the validation fit
+    recovers at least half of the gap between the nominal and the true model."""
+    from dataclasses import replace
+
+    from mocapfj.discover import discover
+    from mocapfj.dynamics import Backlash
+    from mocapfj.synth.hinge import fourier_from_peak
+
+    case = small_grid(6)[0]
+    _, truth = simulate_hinge(case)
+    sd_n = truth["noise"]["deflection_noise_sd_rad"]
+    if effect == "transmission_error":
+        planted = replace(case, te_amplitudes_rad=(0.6 * sd_n, 0.6 * sd_n), te_phases_rad=(0.7, 2.1), te_orders=(1.0, 2.0))
+    else:
+        planted = replace(case, backlash_rad=1.2 * sd_n)
+    rng = np.random.default_rng(4)
+    amps, phases = fourier_from_peak(case.peak_rad, case.n_harmonics, case.f0_hz, rng, accel_max=20.0)
+    valid = replace(planted, seed=case.seed + 1, amplitudes_rad=tuple(amps), phases_rad=tuple(phases))
+    s, v = (mocapfj.signals(simulate_hinge(c)[0]) for c in (planted, valid))
+    nominal = JointModel(name="j1", gear_ratio=case.gear_ratio, I=case.I, J=case.J, mglx=case.mglx, mgly=case.mgly,
+                         b=case.b, friction=CoulombViscous(c=case.c, v=case.v, smoothing=case.eps_rad_s),
+                         spring=LinearSpring(k=case.k))
+    true = nominal.with_(transmission_error=planted.transmission_error(),
+                         spring=Backlash(planted.backlash_rad, nominal.spring) if effect == "backlash" else nominal.spring)
+    d = discover(s, {"j1": nominal}, fs_hz=s["j1"].fs_hz, validation=v)
+    assert [e["name"] for e in d.effects][:1] == [effect], d.verdict
+    vb, va = (d.validation["fit_before"]["j1"], d.validation["fit_after"]["j1"])
+    sv = v["j1"]
+    band = d.validation["fits"]["j1"]["before"]["band_hz"]
+    vt = simulate_joint(true, sv.t, sv.q, sv.q_m, sv.u, band_hz=band).fit
+    assert vt - vb > 0.2 and va - vb >= 0.5 * (vt - vb), (vb, va, vt)
