@@ -19,7 +19,8 @@ Verlet with the friction law set-valued, module docstring of :mod:`.link_respons
   state is advanced exactly along the deflection's path between substep midpoints (the state
   equation is linear in z on each side of z = 0 when n = 1, so each piece is an exponential);
 - a kinematic transmission error e(q_m) (:class:`.TransmissionError`), evaluated at every
-  substep's motor angle: the spring sees q_m + e - q.
+  substep's motor angle: the spring sees q_m + e - q. Its fastest order advances at most 0.5 rad
+  per substep (more substeps when the wave generator turns fast).
 
 It returns q, q' and the spring torque at the samples; the motor equation then gives u.
 """
@@ -305,6 +306,10 @@ def link_forward(q_m, fs_hz: float, *, I: float, mglx: float, mgly: float, frict
     else:
         N, amps, phases, orders = 1.0, np.zeros(0), np.zeros(0), np.zeros(0)
     n_sub = substeps(I, k, dt, max_phase)
+    if amps.size:
+        # the transmission error's fastest order advances at most 0.5 rad per substep
+        rate = float(np.max(np.abs(orders)) * N * np.max(np.abs(qd_m)))
+        n_sub = max(n_sub, int(math.ceil(rate * dt / 0.5)))
     q, w, tau = _kernel()(q_m, qd_m, dt, n_sub, float(I), float(mglx), float(mgly), fr, int(kind), P, float(gap), N,
                           amps, phases, orders, float(q0), float(qd_m[0] if w0 is None else w0))
     if not (np.isfinite(q).all() and np.isfinite(tau).all()):
