@@ -122,14 +122,15 @@ def _write(case, d: Path, delay_s: float = 0.0) -> dict:
     return read_json(d / "truth.json")
 
 
-def _pair(case) -> tuple[str, str]:
-    return PAIRS[int(case.name.rsplit("_", 1)[1]) % len(PAIRS)]
+def _pair(name: str) -> tuple[str, str]:
+    """The pair ``two_effects`` plants in the case named ``hinge_<seed>_<i>[_<kind>]``."""
+    return PAIRS[int(name.split("_")[2]) % len(PAIRS)]
 
 
 def _planted(case, kind: str, stats: dict, noise: dict, s: float, sign: float):
     """(case with the effect, delay s) sized as the module docstring says."""
     if kind == "two_effects":
-        (a, b), delay = _pair(case), 0.0
+        (a, b), delay = _pair(case.name), 0.0
         for i, k in enumerate((a, b)):
             planted, d = _planted(case, k, stats, noise, s, sign)
             changes = {f: getattr(planted, f) for f in ("spring", "spring_params", "friction_kind", "friction_params",
@@ -231,7 +232,7 @@ def run_case(args) -> dict:
 
 def _size(kind, case, delay):
     if kind == "two_effects":
-        a, b = PAIRS[int(case.name.split("_")[2]) % len(PAIRS)]
+        a, b = _pair(case.name)
         return {**_size(a, case, delay), **_size(b, case, delay)}
     if kind == "stiffening":
         return {"k3": case.spring_params[0]}
@@ -249,10 +250,6 @@ def _size(kind, case, delay):
     return {}
 
 
-def _pair_of_row(r: dict) -> tuple[str, str]:
-    return PAIRS[int(r["case"].rsplit("_", 1)[1]) % len(PAIRS)]
-
-
 def summarize(rows: list[dict]) -> list[str]:
     lines = []
     for kind in KINDS:
@@ -262,9 +259,9 @@ def summarize(rows: list[dict]) -> list[str]:
         ok = [r for r in rs if "error" not in r]
         first = [r["named"][0] if r["named"] else "none" for r in ok]
         if kind == "two_effects":
-            both = [set(_pair_of_row(r)) <= set(r["named"]) for r in ok]
+            both = [set(_pair(r["case"])) <= set(r["named"]) for r in ok]
             lines.append(f"{kind}: {len(rs)} cases, {len(rs) - len(ok)} errors; both found in {sum(both)}/{len(ok)}; "
-                         + "; ".join(f"{'+'.join(_pair_of_row(r))}: {','.join(r['named']) or 'none'}" for r in ok))
+                         + "; ".join(f"{'+'.join(_pair(r['case']))}: {','.join(r['named']) or 'none'}" for r in ok))
             continue
         want = "none" if kind == "control" else kind
         hit = sum(f == want for f in first)

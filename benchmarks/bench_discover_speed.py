@@ -38,7 +38,6 @@ KINDS = ("control", "hysteresis", "stiffening", "time_delay", "stribeck", "frict
 
 def _bundles(kind: str, root: Path) -> tuple[Path, Path, Path]:
     from bench_discover_grid import _models, _planted, _shift_controller
-    from bench_discover_floor import true_model  # noqa: F401 - imported by _models
     from mocapfj.discover import write_model_file
     from mocapfj.io import read_json
     from mocapfj.synth.hinge import case_digest, first_row_case, write_hinge_bundle

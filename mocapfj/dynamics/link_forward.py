@@ -167,10 +167,11 @@ def _run_py(q_m, qd_m, dt, n_sub, I, mglx, mgly, fr, kind, P, gap, N, amps, phas
     q = q0
     w = w0
     z = 0.0
-    d_prev = _engaged(q_m[0] + _te_value(q_m[0], N, amps, phases, orders) - q, gap)
+    dl0 = q_m[0] + _te_value(q_m[0], N, amps, phases, orders) - q
+    d_prev = _engaged(dl0, gap)
     q_out[0] = q
     w_out[0] = w
-    tau_out[0] = _spring_torque(kind, P, gap, q_m[0] + _te_value(q_m[0], N, amps, phases, orders) - q, z)
+    tau_out[0] = _spring_torque(kind, P, gap, dl0, z)
     for i in range(1, T):
         a = q_m[i - 1]
         b = q_m[i]

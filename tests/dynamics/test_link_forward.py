@@ -39,10 +39,14 @@ ELEMENTS = {
 def test_matches_the_general_simulator(name):
     """Within 1e-5 rad of LSODA (rtol 1e-8) on a PA-10 joint (deflection 5-10 mrad): a fiftieth of
     a deflection noise of 6.4e-5 rad; the spring torque within 0.1 % of its SD."""
-    fr, sp, te = ELEMENTS[name]
+    _check_against_lsoda(*ELEMENTS[name], max_step=1e-3)
+
+
+def _check_against_lsoda(fr, sp, te, max_step):
+    """The kernel's q and tau_s against LSODA (rtol 1e-8, `max_step` s) on the PA-10 joint."""
     m = SingleJoint(I=I, J=12.0, spring=sp, mglx=MGLX, mgly=MGLY, friction=fr, drivetrain=Drivetrain(transmission_error=te))
     q0 = m.static_link_angle(np.array([QM[0]]))
-    ref = simulate(m, T, PrescribedMotor.from_samples(T, QM), q0=q0, qd0=[QD[0]], rtol=1e-8, atol=1e-11, max_step=1e-3)
+    ref = simulate(m, T, PrescribedMotor.from_samples(T, QM), q0=q0, qd0=[QD[0]], rtol=1e-8, atol=1e-11, max_step=max_step)
     q, _, tau = link_forward(QM, FS, I=I, mglx=MGLX, mgly=MGLY, friction=fr, spring=sp, transmission_error=te,
                              qd_m=QD, q0=float(q0[0]), d_span=0.02)
     assert np.abs(q - ref.q[:, 0]).max() < 1e-5
@@ -80,11 +84,4 @@ def test_a_fast_wave_generator_gets_the_substeps_it_needs():
     """N = 160: the second order of the transmission error runs at up to 800 rad/s, 0.8 rad per
     millisecond sample; the kernel substeps it and stays within 1e-5 rad of LSODA."""
     te = TransmissionError(160, (6e-5, 3e-5), (0.3, 1.0), (1.0, 2.0))
-    fr, sp = CoulombViscous(9.28, 18.4, smoothing=EPS), LinearSpring(K)
-    m = SingleJoint(I=I, J=12.0, spring=sp, mglx=MGLX, mgly=MGLY, friction=fr, drivetrain=Drivetrain(transmission_error=te))
-    q0 = m.static_link_angle(np.array([QM[0]]))
-    ref = simulate(m, T, PrescribedMotor.from_samples(T, QM), q0=q0, qd0=[QD[0]], rtol=1e-8, atol=1e-11, max_step=2e-4)
-    q, _, tau = link_forward(QM, FS, I=I, mglx=MGLX, mgly=MGLY, friction=fr, spring=sp, transmission_error=te,
-                             qd_m=QD, q0=float(q0[0]), d_span=0.02)
-    assert np.abs(q - ref.q[:, 0]).max() < 1e-5
-    assert np.abs(tau - ref.tau_s[:, 0]).max() < 1e-3 * ref.tau_s[:, 0].std()
+    _check_against_lsoda(CoulombViscous(9.28, 18.4, smoothing=EPS), LinearSpring(K), te, max_step=2e-4)
