@@ -78,6 +78,9 @@ PAIRS = (("hysteresis", "friction_asymmetry"), ("stiffening", "time_delay"), ("t
          ("backlash", "time_delay"), ("stiffening", "stribeck"), ("hysteresis", "time_delay"))
 """The pairs ``two_effects`` plants, case i taking pair i mod 6, each effect sized on its own."""
 ALPHA_HYST = 0.7
+VISIBLE_SDS = 3.0
+"""A case's trial shows its effect when the true model fits the trial better than the nominal by
+more than this many SDs of that change the recording's noise gives."""
 
 
 def _validation_case(case, seed: int):
@@ -219,6 +222,14 @@ def run_case(args) -> dict:
         sv = mocapfj.signals(valid)["j1"]
         band = r["validation"]["fits"]["j1"]["before"]["band_hz"]            # the nominal model's band
         tv = simulate_joint(true, sv.t, sv.q, sv.q_m, sv.u, band_hz=band).summary()
+        # how far the trial itself shows the effect: the true model against the nominal on it,
+        # in noise SDs of that change (an effect the trial does not excite cannot be found there)
+        st = mocapfj.signals(ident)["j1"]
+        band_t = r["fits"]["j1"]["before"]["band_hz"]
+        nom_t = simulate_joint(nominal, st.t, st.q, st.q_m, st.u, band_hz=band_t)
+        true_t = simulate_joint(true, st.t, st.q, st.q_m, st.u, band_hz=band_t)
+        sd_t = nom_t.change_sd(true_t)
+        out.update(t_gap=true_t.fit - nom_t.fit, t_gap_sds=(true_t.fit - nom_t.fit) / sd_t if sd_t > 0 else 0.0)
         out.update(named=[e["name"] for e in r["effects"]], verdict=r["verdict"],
                    fit_before=r["fit_before"]["j1"], fit_after=r["fit_after"]["j1"],
                    v_before=r["validation"]["fit_before"]["j1"], v_after=r["validation"]["fit_after"]["j1"],
@@ -269,6 +280,10 @@ def summarize(rows: list[dict]) -> list[str]:
                      f"({want}) in {hit}/{len(ok)}; named first: "
                      + ", ".join(f"{n} {first.count(n)}" for n in sorted(set(first))))
         if kind != "control":
+            vis = [f == want for f, r in zip(first, ok) if r.get("t_gap_sds", 0.0) > VISIBLE_SDS]
+            lines.append(f"  on the cases whose trial shows the effect (true model > {VISIBLE_SDS:g} noise SDs above the "
+                         f"nominal on the trial): {sum(vis)}/{len(vis)}")
+        if kind != "control":
             rec = []
             for r in ok:
                 if r["named"] and r["named"][0] == kind:
@@ -315,14 +330,14 @@ def main(argv=None) -> int:
     print(f"discovery grid: {len(cases)} cases x {len(kinds)} kinds, base seed {args.base_seed}, "
           f"{time.perf_counter() - tic:.0f} s wall on {args.jobs} processes")
     print(f"{'case':20s} {'family':8s} {'kind':11s} {'s':>4s} {'named':28s} {'fit before->after':>18s} "
-          f"{'valid before->after':>20s} {'true':>6s} {'floor':>6s} {'sec':>5s}  size")
+          f"{'valid before->after':>20s} {'true':>6s} {'floor':>6s} {'t_sds':>6s} {'sec':>5s}  size")
     for r in rows:
         if "error" in r:
             print(f"{r['case']:20s} {r['family']:8s} {r['kind']:11s} {r['s']:4.2f} ERROR {r['error']}")
             continue
         print(f"{r['case']:20s} {r['family']:8s} {r['kind']:11s} {r['s']:4.2f} {','.join(r['named']) or 'none':28s} "
               f"{r['fit_before']:7.2f} -> {r['fit_after']:6.2f} {r['v_before']:8.2f} -> {r['v_after']:7.2f} "
-              f"{r['v_true']:6.2f} {r['v_floor']:6.2f} {r['seconds']:5.1f}  "
+              f"{r['v_true']:6.2f} {r['v_floor']:6.2f} {r.get('t_gap_sds', 0.0):6.1f} {r['seconds']:5.1f}  "
               + " ".join(f"{k} {v:.3g}" for k, v in r["size"].items()))
     print()
     for line in summarize(rows):

@@ -36,7 +36,9 @@ EFFECTS = SPRING_EFFECTS + LINK_EFFECTS
 class Candidate:
     """A fitted effect: `name`, `family` ("spring" or "link"), `params` (JSON-ready), `n_params`,
     `contribution` (T,) N m, `apply` (JointModel -> augmented JointModel), `location` (dict) and
-    `explain` (callable: gain dict -> one paragraph)."""
+    `explain` (callable: gain dict -> one paragraph). `theta` (its parameters as a vector, on the
+    scales `steps` give), with `rebuild` (theta -> Candidate), lets discovery refit it by output
+    error; None for effects refitted only by equation error."""
 
     name: str
     family: str
@@ -46,6 +48,9 @@ class Candidate:
     apply: Callable
     location: dict
     explain: Callable = field(repr=False)
+    theta: np.ndarray | None = field(default=None, repr=False)
+    steps: np.ndarray | None = field(default=None, repr=False)
+    rebuild: Callable | None = field(default=None, repr=False)
 
 
 def _ls(cols: list[np.ndarray], y: np.ndarray, mask: np.ndarray) -> tuple[np.ndarray, float]:
@@ -95,20 +100,26 @@ def hysteresis(fam: Families, mask, others) -> Candidate | None:
     if not 0.0 <= alpha <= 1.0:           # the loop's share of the stiffness beyond the spring's
         return None
     contribution = np.column_stack(cols(x)) @ c
-    half_width = 1.0 / (beta + gamma)
-    params = {"k": kt, "alpha": alpha, "beta": beta, "gamma": gamma, "loop_half_height_Nm": k_h * half_width}
-    loc = {"signal": "spring torque vs deflection", "where": "deflection reversals",
-           "loop_half_width_mrad": 1e3 * half_width, "loop_half_height_Nm": k_h * half_width}
 
-    def explain(g):
-        return (f"The spring torque depends on the direction the deflection last moved: at each reversal it "
-                f"lags by a loop of about {1e3 * half_width:.2f} mrad width and {k_h * half_width:.2f} N m "
-                f"half-height ({100 * (1 - alpha):.1f} % of the stiffness acts through a hysteretic state). "
-                f"This is hysteresis in the harmonic drive's flexspline and wave-generator contact, not "
-                f"modelled by the linear spring; a Bouc-Wen spring (k {kt:.4g} N m/rad, alpha {alpha:.3f}) "
-                f"reproduces it.")
-    return Candidate("hysteresis", "spring", params, 5, contribution,
-                     lambda m: m.with_(spring=BoucWen(k=kt, alpha=alpha, beta=beta, gamma=gamma)), loc, explain)
+    def build(th):
+        alpha, beta, gamma = float(th[0]), float(np.exp(th[1])), float(np.exp(th[2]))
+        k_h = (1.0 - alpha) * kt
+        half_width = 1.0 / (beta + gamma)
+        params = {"k": kt, "alpha": alpha, "beta": beta, "gamma": gamma, "loop_half_height_Nm": k_h * half_width}
+        loc = {"signal": "spring torque vs deflection", "where": "deflection reversals",
+               "loop_half_width_mrad": 1e3 * half_width, "loop_half_height_Nm": k_h * half_width}
+
+        def explain(g):
+            return (f"The spring torque depends on the direction the deflection last moved: at each reversal it "
+                    f"lags by a loop of about {1e3 * half_width:.2f} mrad width and {k_h * half_width:.2f} N m "
+                    f"half-height ({100 * (1 - alpha):.1f} % of the stiffness acts through a hysteretic state). "
+                    f"This is hysteresis in the harmonic drive's flexspline and wave-generator contact, not "
+                    f"modelled by the linear spring; a Bouc-Wen spring (k {kt:.4g} N m/rad, alpha {alpha:.3f}) "
+                    f"reproduces it.")
+        return Candidate("hysteresis", "spring", params, 5, contribution,
+                         lambda m: m.with_(spring=BoucWen(k=kt, alpha=alpha, beta=beta, gamma=gamma)), loc, explain,
+                         np.asarray(th, float), np.array([0.1 * max(1.0 - alpha, 0.05), 0.5, 0.5]), build)
+    return build(np.array([alpha, np.log(beta), np.log(gamma)]))
 
 
 def _three_slopes(d: np.ndarray, d1: float, d2: float) -> list[np.ndarray]:
@@ -146,20 +157,25 @@ def stiffening(fam: Families, mask, others) -> Candidate | None:
     if not np.all(K > 0) or K[0] < 0.2 * K[1]:     # a soft centre with almost no stiffness is backlash
         return None
     contribution = np.column_stack(basis) @ c
-    tau1, tau2 = K[0] * d1, K[0] * d1 + K[1] * (d2 - d1)
-    params = {"k1": float(K[0]), "k2": float(K[1]), "k3": float(K[2]), "tau1": float(tau1), "tau2": float(tau2)}
-    loc = {"signal": "spring torque vs deflection", "where": "stiffness changes with the load",
-           "breakpoints_mrad": [1e3 * d1, 1e3 * d2], "breakpoints_Nm": [float(tau1), float(tau2)]}
-
-    def explain(g):
-        trend = "rises" if K[2] > K[0] else "falls"
-        return (f"The joint's stiffness {trend} with the load: {K[0]:.4g} N m/rad below {tau1:.1f} N m, "
-                f"{K[1]:.4g} N m/rad up to {tau2:.1f} N m and {K[2]:.4g} N m/rad beyond. Harmonic drives stiffen "
-                f"as more flexspline teeth come into contact (the K1 < K2 < K3 of their datasheets, soft wind-up "
-                f"at low torque); a three-slope spring replaces the linear one.")
     from ..dynamics import PiecewiseSpring
-    el = PiecewiseSpring(k1=float(K[0]), k2=float(K[1]), k3=float(K[2]), tau1=float(tau1), tau2=float(tau2))
-    return Candidate("stiffening", "spring", params, 5, contribution, lambda m: m.with_(spring=el), loc, explain)
+
+    def build(th):
+        K = k * np.exp(np.asarray(th, float))            # the three stiffnesses, breakpoints in deflection held
+        tau1, tau2 = K[0] * d1, K[0] * d1 + K[1] * (d2 - d1)
+        params = {"k1": float(K[0]), "k2": float(K[1]), "k3": float(K[2]), "tau1": float(tau1), "tau2": float(tau2)}
+        loc = {"signal": "spring torque vs deflection", "where": "stiffness changes with the load",
+               "breakpoints_mrad": [1e3 * d1, 1e3 * d2], "breakpoints_Nm": [float(tau1), float(tau2)]}
+
+        def explain(g):
+            trend = "rises" if K[2] > K[0] else "falls"
+            return (f"The joint's stiffness {trend} with the load: {K[0]:.4g} N m/rad below {tau1:.1f} N m, "
+                    f"{K[1]:.4g} N m/rad up to {tau2:.1f} N m and {K[2]:.4g} N m/rad beyond. Harmonic drives stiffen "
+                    f"as more flexspline teeth come into contact (the K1 < K2 < K3 of their datasheets, soft wind-up "
+                    f"at low torque); a three-slope spring replaces the linear one.")
+        el = PiecewiseSpring(k1=float(K[0]), k2=float(K[1]), k3=float(K[2]), tau1=float(tau1), tau2=float(tau2))
+        return Candidate("stiffening", "spring", params, 5, contribution, lambda m: m.with_(spring=el), loc, explain,
+                         np.asarray(th, float), np.full(3, 0.1), build)
+    return build(np.log(K / k))
 
 
 def backlash(fam: Families, mask, others) -> Candidate | None:
@@ -184,16 +200,21 @@ def backlash(fam: Families, mask, others) -> Candidate | None:
     if not 0.5 * k < k_b < 2.0 * k:
         return None
     contribution = np.column_stack(cols(gap)) @ c - fam.lp(k * d)
-    params = {"gap_rad": gap, "k": k_b}
-    loc = {"signal": "spring torque vs deflection", "where": "torque reversals", "dead_zone_mrad": 1e3 * gap}
 
-    def explain(g):
-        return (f"Around each torque reversal the deflection crosses a zone of about {1e3 * gap:.2f} mrad "
-                f"(total) where the spring carries almost no torque: lost motion (backlash) in the "
-                f"transmission, between the wave generator, flexspline and circular spline or in a "
-                f"coupling. A dead zone in front of the spring (stiffness {k_b:.4g} N m/rad) models it.")
-    return Candidate("backlash", "spring", params, 2, contribution,
-                     lambda m: m.with_(spring=Backlash(gap, LinearSpring(k_b))), loc, explain)
+    def build(th):
+        gap, k_b = float(np.exp(th[0])), float(k * np.exp(th[1]))
+        params = {"gap_rad": gap, "k": k_b}
+        loc = {"signal": "spring torque vs deflection", "where": "torque reversals", "dead_zone_mrad": 1e3 * gap}
+
+        def explain(g):
+            return (f"Around each torque reversal the deflection crosses a zone of about {1e3 * gap:.2f} mrad "
+                    f"(total) where the spring carries almost no torque: lost motion (backlash) in the "
+                    f"transmission, between the wave generator, flexspline and circular spline or in a "
+                    f"coupling. A dead zone in front of the spring (stiffness {k_b:.4g} N m/rad) models it.")
+        return Candidate("backlash", "spring", params, 2, contribution,
+                         lambda m: m.with_(spring=Backlash(gap, LinearSpring(k_b))), loc, explain,
+                         np.asarray(th, float), np.array([0.5, 0.1]), build)
+    return build(np.array([np.log(gap), np.log(k_b / k)]))
 
 
 def transmission_error(fam: Families, mask, others) -> Candidate | None:
@@ -260,19 +281,24 @@ def time_delay(fam: Families, mask, others) -> Candidate | None:
     r = resid(d)
     c, _ = _ls([np.ones_like(r)], r, mask)
     contribution = base - (r - c[0])
-    params = {"delay_s": d}
-    loc = {"signal": "spring torque vs deflection", "where": "cross-correlation of the residual with the link velocity",
-           "lag_ms": 1e3 * d}
 
-    def explain(g):
-        late = "late" if d > 0 else "early"
-        return (f"The deflection residual follows the link velocity, as a clock offset does: the mocap samples "
-                f"are {1e3 * abs(d):.2f} ms {late} on the controller clock beyond the declared offset. Camera "
-                f"exposure and processing latency, or a trigger offset between the mocap system and the "
-                f"controller, give this; the deflection then carries q' x delay of spurious motion. Shifting the "
-                f"link angle by {1e3 * d:.2f} ms removes it.")
-    return Candidate("time_delay", "spring", params, 1, contribution,
-                     lambda m: m.with_(delay_s=m.delay_s + d), loc, explain)
+    def build(th):
+        d = float(th[0])
+        params = {"delay_s": d}
+        loc = {"signal": "spring torque vs deflection",
+               "where": "cross-correlation of the residual with the link velocity", "lag_ms": 1e3 * d}
+
+        def explain(g):
+            late = "late" if d > 0 else "early"
+            return (f"The deflection residual follows the link velocity, as a clock offset does: the mocap samples "
+                    f"are {1e3 * abs(d):.2f} ms {late} on the controller clock beyond the declared offset. Camera "
+                    f"exposure and processing latency, or a trigger offset between the mocap system and the "
+                    f"controller, give this; the deflection then carries q' x delay of spurious motion. Shifting "
+                    f"the link angle by {1e3 * d:.2f} ms removes it.")
+        return Candidate("time_delay", "spring", params, 1, contribution,
+                         lambda m: m.with_(delay_s=m.delay_s + d), loc, explain, np.asarray(th, float),
+                         np.array([2e-4]), build)
+    return build(np.array([d]))
 
 
 def drive_gain(fam: Families, mask, others) -> Candidate | None:
@@ -320,17 +346,22 @@ def stribeck(fam: Families, mask, others) -> Candidate | None:
         return None
     fc, fv = cv
     contribution = np.column_stack(cols(vs)) @ c
-    params = {"fs": fc + peak, "fc": fc, "vs": vs, "fv": fv}
-    loc = {"signal": "link torque", "where": f"low speed, |q'| < {3 * vs:.3g} rad/s, both signs",
-           "velocity_rad_s": vs, "excess_Nm": peak}
 
-    def explain(g):
-        return (f"At low speed (|q'| below about {3 * vs:.3g} rad/s, on both signs) the joint needs "
-                f"{peak:.2f} N m more than Coulomb plus viscous friction predict, falling off over a Stribeck "
-                f"velocity of {vs:.3g} rad/s: the breakaway friction of the lubricated gear and bearing "
-                f"contacts (static {fc + peak:.2f} N m vs sliding {fc:.2f} N m, Oueslati et al. (2012), eq. 7).")
-    return Candidate("stribeck", "link", params, 2, contribution,
-                     lambda m: m.with_(friction=Stribeck(fc=fc, fs=fc + peak, vs=vs, fv=fv)), loc, explain)
+    def build(th):
+        peak, vs = float(fc * np.exp(th[0]) if fc > 0 else np.exp(th[0])), float(np.exp(th[1]))
+        params = {"fs": fc + peak, "fc": fc, "vs": vs, "fv": fv}
+        loc = {"signal": "link torque", "where": f"low speed, |q'| < {3 * vs:.3g} rad/s, both signs",
+               "velocity_rad_s": vs, "excess_Nm": peak}
+
+        def explain(g):
+            return (f"At low speed (|q'| below about {3 * vs:.3g} rad/s, on both signs) the joint needs "
+                    f"{peak:.2f} N m more than Coulomb plus viscous friction predict, falling off over a Stribeck "
+                    f"velocity of {vs:.3g} rad/s: the breakaway friction of the lubricated gear and bearing "
+                    f"contacts (static {fc + peak:.2f} N m vs sliding {fc:.2f} N m, Oueslati et al. (2012), eq. 7).")
+        return Candidate("stribeck", "link", params, 2, contribution,
+                         lambda m: m.with_(friction=Stribeck(fc=fc, fs=fc + peak, vs=vs, fv=fv)), loc, explain,
+                         np.asarray(th, float), np.array([0.5, 0.5]), build)
+    return build(np.array([np.log(peak / fc if fc > 0 else peak), np.log(vs)]))
 
 
 def friction_asymmetry(fam: Families, mask, others) -> Candidate | None:
@@ -345,18 +376,23 @@ def friction_asymmetry(fam: Families, mask, others) -> Candidate | None:
     dc, dv = float(c[0]), float(c[1])            # r_l = F_true - F_nominal = dc + dv |q'| while moving
     fc, fv = cv
     contribution = np.column_stack(cols) @ c
-    el = AsymmetricCoulombViscous(c_pos=fc + dc, c_neg=fc - dc, v_pos=fv + dv, v_neg=fv - dv)
-    params = {"c_pos": fc + dc, "c_neg": fc - dc, "v_pos": fv + dv, "v_neg": fv - dv}
-    loc = {"signal": "link torque", "where": "sign of the velocity",
-           "mean_difference_Nm": 2 * dc, "viscous_difference_Nm_s": 2 * dv}
 
-    def explain(g):
-        return (f"The friction differs with the direction of motion: Coulomb {fc + dc:.2f} N m and viscous "
-                f"{fv + dv:.2f} N m s for q' > 0 against {fc - dc:.2f} N m and {fv - dv:.2f} N m s for q' < 0. "
-                f"Seal preload, the helix of the gearing and lubricant distribution make joint friction "
-                f"direction-dependent (Oueslati et al. (2012), Table I, Bompos et al. (2007), Table II).")
-    return Candidate("friction_asymmetry", "link", params, 2, contribution,
-                     lambda m: m.with_(friction=el), loc, explain)
+    def build(th):
+        dc, dv = float(th[0]), float(th[1])
+        el = AsymmetricCoulombViscous(c_pos=fc + dc, c_neg=fc - dc, v_pos=fv + dv, v_neg=fv - dv)
+        params = {"c_pos": fc + dc, "c_neg": fc - dc, "v_pos": fv + dv, "v_neg": fv - dv}
+        loc = {"signal": "link torque", "where": "sign of the velocity",
+               "mean_difference_Nm": 2 * dc, "viscous_difference_Nm_s": 2 * dv}
+
+        def explain(g):
+            return (f"The friction differs with the direction of motion: Coulomb {fc + dc:.2f} N m and viscous "
+                    f"{fv + dv:.2f} N m s for q' > 0 against {fc - dc:.2f} N m and {fv - dv:.2f} N m s for q' < 0. "
+                    f"Seal preload, the helix of the gearing and lubricant distribution make joint friction "
+                    f"direction-dependent (Oueslati et al. (2012), Table I, Bompos et al. (2007), Table II).")
+        return Candidate("friction_asymmetry", "link", params, 2, contribution,
+                         lambda m: m.with_(friction=el), loc, explain, np.asarray(th, float),
+                         np.array([0.1 * fc + 1e-3, 0.1 * fv + 1e-3]), build)
+    return build(np.array([dc, dv]))
 
 
 def position_dependent_friction(fam: Families, mask, others) -> Candidate | None:

@@ -967,10 +967,20 @@ def identify_output_error(t, q, q_m, u, *, fs_hz: float, measured=None, controll
     # a weaker loop (down to the cubic's threshold) wins over a cubic term that gains less
     weak = _hysteresis_test(prob, x, CUBIC_CHI2) if test_hysteresis and hysteresis is None else None
     if test_cubic and hysteresis is None:
+        d_lin = q_m_c - prob.simulate(x)[0]
         x3 = x.copy()
-        x3[_IDX["k3"]] = 0.3 * x[_IDX["k"]] / (3.0 * float(np.percentile(np.abs(q_m_c - prob.simulate(x)[0]), 95)) ** 2)
+        x3[_IDX["k3"]] = 0.3 * x[_IDX["k"]] / (3.0 * float(np.percentile(np.abs(d_lin), 95)) ** 2)
         pc, xc, cc = fit(band, law, x3, noise, 25, cubic=True)       # from 30 % stiffening: the
         #                                                          k3 column is tiny near zero
+        if cc > cost:
+            # stopped in another valley: from the same stiffening with the linear fit's
+            # equivalent stiffness kept (k1 + k3 E[d^4] / E[d^2] = k, the least-squares line of the
+            # cubic over the deflections met), where the cubic starts as good as the line
+            x3[_IDX["k"]] = x[_IDX["k"]] - x3[_IDX["k3"]] * float(np.mean(d_lin ** 4) / np.mean(d_lin ** 2))
+            if x3[_IDX["k"]] > 0.2 * x[_IDX["k"]]:
+                p2, x2, c2 = fit(band, law, x3, noise, 25, cubic=True)
+                if c2 < cc:
+                    pc, xc, cc = p2, x2, c2
         d95 = float(np.percentile(np.abs(q_m_c - pc.simulate(xc)[0]), 95))
         change = 300.0 * xc[_IDX["k3"]] * d95 ** 2 / xc[_IDX["k"]]
         if _DEBUG:
