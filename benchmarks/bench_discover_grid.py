@@ -34,7 +34,11 @@ would run it: ``mocapfj discover IDENT --model NOMINAL --validation VALID``. NOM
 true parameters without the effect, so a control's nominal is its true model.
 
 Per kind it prints:
-- named first, and how often the named effect is the planted one;
+- named first, and how often the named effect is the planted one; again on the cases whose trial
+  shows the effect (column ``t_sds``: the true model's trial fit above the nominal's, in noise SDs
+  of that change; above VISIBLE_SDS = 3). A validation recording can excite an effect its trial
+  does not (free play on a gravity-loaded heavy joint whose trial torque never reverses): such a
+  case cannot be found from its trial;
 - the gain on the validation recording against the gap between the nominal and the true model;
 - the error of a delay;
 - failures.
