@@ -353,11 +353,15 @@ def _refine(cand, model, train) -> tuple:
     data, others, band = train
 
     def neg_fit(th):
+        # a trial vector can make the element overflow (a loop far too narrow): scored as the
+        # worst, not warned about
         try:
-            m = cand.rebuild(th).apply(model)
-            return -simulate_joint(m, data.t, data.q, data.q_m, data.u, others, band_hz=band).fit
+            with np.errstate(over="ignore", invalid="ignore"):
+                m = cand.rebuild(th).apply(model)
+                f = simulate_joint(m, data.t, data.q, data.q_m, data.u, others, band_hz=band).fit
         except (InputError, RuntimeError, FloatingPointError, ValueError, np.linalg.LinAlgError):
             return np.inf
+        return -f if np.isfinite(f) else np.inf
 
     x0 = np.asarray(cand.theta, float)
     simplex = np.vstack([x0] + [x0 + np.eye(x0.size)[i] * cand.steps[i] for i in range(x0.size)])
