@@ -42,6 +42,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..ident.conditioning import lowpass, noise_floor_sd, noise_gain
+from .memo import by_content
 
 __all__ = ["BAND_FRACTION", "MIN_BAND_HZ", "MIN_PERIOD_CORR", "comparison_band_hz", "excitation_period_s",
            "Channel", "compare_channel", "combined_fit", "combined_floor_sd", "WHITE_BAND", "fit_change_sd"]
@@ -57,6 +58,17 @@ where a joint's motion has little power and a resampler's anti-alias filter (at 
 yet cut."""
 MIN_PERIOD_CORR = 0.95
 """The motor angle is periodic when its normalised autocorrelation reaches this at some lag."""
+
+
+@by_content()
+def _white_sd(x: np.ndarray, fs_hz: float) -> float:
+    """The recorded signal's white floor over WHITE_BAND (the recording's alone: kept, :mod:`.memo`)."""
+    return noise_floor_sd(x, fs_hz, *WHITE_BAND)
+
+
+@by_content(64)
+def _gain(fs_hz: float, band_hz: float) -> float:
+    return noise_gain(fs_hz, band_hz)
 
 
 def comparison_band_hz(k: float, I: float, fs_hz: float) -> float:
@@ -203,7 +215,7 @@ def compare_channel(y: np.ndarray, y_hat: np.ndarray, raw: np.ndarray | None, fs
     if raw is not None and (bounded or not np.isfinite(v_per)):
         x = np.asarray(raw, dtype=np.float64)
         x = x[np.isfinite(x)]
-        white = noise_floor_sd(x, fs_hz, *WHITE_BAND) ** 2 * noise_gain(fs_hz, band_hz) if x.size > 64 else 0.0
+        white = _white_sd(x, fs_hz) ** 2 * _gain(fs_hz, band_hz) if x.size > 64 else 0.0
     var = white
     if np.isfinite(v_per) and v_per >= white:
         var, method = v_per, "periods"
@@ -244,7 +256,7 @@ def fit_change_sd(t: np.ndarray, keep: np.ndarray, band_hz: float, fit: float, c
     t, keep : (T,) the samples compared; fit : the first model's joint fit %; channels : for each
     channel (recorded SD in band, noise SD in band, the change of the prediction (T,))."""
     fs = 1.0 / float(np.median(np.diff(t)))
-    g = noise_gain(fs, band_hz)
+    g = _gain(fs, band_hz)
     idx = np.flatnonzero(keep)
     sl = slice(int(idx[0]), int(idx[-1]) + 1)
     E = (1.0 - fit / 100.0) ** 2

@@ -29,6 +29,7 @@ from ..dynamics import JointModel, PositionTorque, PrescribedMotor, Transmission
 from ..dynamics.spec import FRICTION_MODELS, SPRING_MODELS, element_from_table
 from ..errors import InputError
 from ..io.tomlio import describe, read_toml, require, write_toml
+from .memo import by_content
 
 __all__ = ["JointModel", "read_model_file", "write_model_file", "fit_pct", "simulate_joint", "OutputError"]
 
@@ -185,8 +186,6 @@ def _plain_link(model: JointModel, t, drive, d_span: float):
     transmission error, a drive gain). The motor's velocity and acceleration are the cubic
     spline's of `drive`, as the general path's; `d_span` rad bounds the deflections met (for the
     kernel's substeps)."""
-    from scipy.interpolate import CubicSpline
-
     from ..dynamics import CoulombViscous, CubicSpring, LinearSpring
     from ..dynamics.link_forward import encode_friction, encode_spring, link_forward
     from ..dynamics.link_response import link_response
@@ -205,8 +204,7 @@ def _plain_link(model: JointModel, t, drive, d_span: float):
             return None
     elif encode_friction(fr) is None or encode_spring(sp) is None:
         return None
-    spline = CubicSpline(t, drive)
-    qd, qdd = spline(t, 1), spline(t, 2)
+    qd, qdd = _spline_rates(t, drive)
     if plain:
         q_sim, _ = link_response(drive, fs, I=model.I, mglx=model.mglx, mgly=model.mgly, c=fr.c, v=fr.v,
                                  k=k, eps=fr.smoothing, k3=k3, qd_m=qd)
@@ -217,6 +215,29 @@ def _plain_link(model: JointModel, t, drive, d_span: float):
                                  transmission_error=model.transmission_error, qd_m=qd, q0=q0, d_span=d_span)
     gain = 1.0 if model.transmission_error is None else 1.0 + model.transmission_error.derivative(drive)
     return q_sim, (model.J * qdd + model.b * qd + gain * tau) / model.torque_gain
+
+
+@by_content()
+def _wiener_drive(q_m, fs):
+    from ..ident.output_error import wiener_drive
+
+    return wiener_drive(q_m, fs)
+
+
+@by_content()
+def _spline_rates(t, drive):
+    """(velocity, acceleration) (T,) of the cubic spline through the drive's samples."""
+    from scipy.interpolate import CubicSpline
+
+    spline = CubicSpline(t, drive)
+    return np.stack([spline(t, 1), spline(t, 2)])
+
+
+@by_content()
+def _period_s(q_m, fs):
+    from .compare import excitation_period_s
+
+    return excitation_period_s(q_m, fs)
 
 
 def simulate_joint(model: JointModel, t, q, q_m, u, others_qdd: dict | None = None, *, trim_s: float = 1.0,
@@ -232,8 +253,7 @@ def simulate_joint(model: JointModel, t, q, q_m, u, others_qdd: dict | None = No
     band_hz : the comparison band; default the model's own (:func:`.compare.comparison_band_hz` at
     the deflections it simulates). Models compared with each other take one band.
     """
-    from ..ident.output_error import wiener_drive
-    from .compare import combined_fit, combined_floor_sd, compare_channel, comparison_band_hz, excitation_period_s
+    from .compare import combined_fit, combined_floor_sd, compare_channel, comparison_band_hz
 
     t, q, q_m, u = (np.asarray(a, dtype=np.float64) for a in (t, q, q_m, u))
     fs = 1.0 / float(np.median(np.diff(t)))
@@ -250,7 +270,7 @@ def simulate_joint(model: JointModel, t, q, q_m, u, others_qdd: dict | None = No
 
     # the motor angle drives the link without the encoder noise that would ring it where the real
     # link, driven by the true motion, does not (mocapfj.ident.output_error.wiener_drive)
-    drive = wiener_drive(q_m, fs)
+    drive = _wiener_drive(q_m, fs)
     fast = _plain_link(model, t, drive, 2.0 * float(np.nanmax(np.abs(q_m - q)))) if ext is None else None
     if fast is not None:
         q_sim, u_sim = fast
@@ -281,7 +301,7 @@ def simulate_joint(model: JointModel, t, q, q_m, u, others_qdd: dict | None = No
         band = float(band_hz)
     inner = (t >= t[0] + trim_s) & (t <= t[-1] - trim_s)
     if period_s == "auto":
-        period_s = excitation_period_s(q_m[inner], fs)
+        period_s = _period_s(q_m[inner], fs)
     cd = compare_channel(d_rec, d_sim, q, fs, band, keep, period_s, center=True)
     cu = compare_channel(u, u_sim, u, fs, band, keep, period_s, bounded=True)
     return OutputError(t=t, q_sim=q_sim, delta_sim=d_sim, u_sim=u_sim, r_delta=r_d, r_u=r_u,
