@@ -30,25 +30,10 @@ import numpy as np
 
 from ..errors import InputError
 from ..types import Board, Camera
+from ..vision.boards import aruco_dictionary, board_points, charuco_board
 from ..vision.camera import in_image, project_points
 
 __all__ = ["BoardView", "BlobClip", "board_points", "board_texture", "render_board_view", "render_blob_clip"]
-
-_APRIL_DICTS = {"tag36h11": "DICT_APRILTAG_36h11", "tag25h9": "DICT_APRILTAG_25h9",
-                "tag16h5": "DICT_APRILTAG_16h5", "tag36h10": "DICT_APRILTAG_36h10"}
-
-
-def _dictionary(board: Board):
-    name = board.dictionary if board.type == "charuco" else _APRIL_DICTS.get(board.family or "", board.dictionary)
-    if not name or not hasattr(cv2.aruco, str(name)):
-        raise InputError(None, "board dictionary/family", "an OpenCV ArUco dictionary or AprilTag family",
-                         board.dictionary if board.type == "charuco" else board.family)
-    return cv2.aruco.getPredefinedDictionary(getattr(cv2.aruco, str(name)))
-
-
-def _charuco(board: Board):
-    return cv2.aruco.CharucoBoard((board.columns, board.rows), board.square_m, board.marker_m, _dictionary(board))
-
 
 def _extent(board: Board) -> tuple[float, float]:
     """Width and height of the printed pattern (without quiet zone), metres."""
@@ -60,37 +45,6 @@ def _extent(board: Board) -> tuple[float, float]:
         pitch = board.tag_m + board.spacing_m
         return board.columns * pitch - board.spacing_m, board.rows * pitch - board.spacing_m
     raise InputError(None, "board.type", "chessboard, charuco or aprilgrid", board.type)
-
-
-def board_points(board: Board) -> tuple[np.ndarray, np.ndarray]:
-    """The feature points of `board` in its frame.
-
-    Returns
-    -------
-    ids : (N,) int
-        chessboard: j * columns + i for inner corner (i, j); charuco: OpenCV's charuco corner
-        id; aprilgrid: 4 * tag_id + k with k = 0..3 the tag corners top-left, top-right,
-        bottom-right, bottom-left (ArUco order), tag_id = row * columns + column.
-    p_board : (N, 3) float
-        Positions in the board frame, metres (z = 0).
-    """
-    if board.type == "chessboard":
-        j, i = np.mgrid[0:board.rows, 0:board.columns]
-        xy = np.stack([(i.ravel() + 1) * board.square_m, (j.ravel() + 1) * board.square_m], axis=1)
-        ids = np.arange(board.rows * board.columns)
-    elif board.type == "charuco":
-        p = np.asarray(_charuco(board).getChessboardCorners(), dtype=np.float64)
-        return np.arange(len(p)), p
-    elif board.type == "aprilgrid":
-        pitch = board.tag_m + board.spacing_m
-        j, i = np.mgrid[0:board.rows, 0:board.columns]
-        tl = np.stack([i.ravel() * pitch, j.ravel() * pitch], axis=1)                      # (n_tags, 2)
-        k = np.array([[0, 0], [1, 0], [1, 1], [0, 1]], dtype=np.float64) * board.tag_m
-        xy = (tl[:, None, :] + k[None]).reshape(-1, 2)
-        ids = np.arange(len(xy))
-    else:
-        raise InputError(None, "board.type", "chessboard, charuco or aprilgrid", board.type)
-    return ids, np.concatenate([xy, np.zeros((len(xy), 1))], axis=1)
 
 
 def _texels(length_m: float, px_per_m: float, what: str) -> int:
@@ -132,13 +86,13 @@ def board_texture(board: Board, px_per_m: float = 10000.0, margin_m: float | Non
     elif board.type == "charuco":
         s = _texels(board.square_m, px_per_m, "square_m")
         _texels(board.marker_m, px_per_m, "marker_m")
-        pattern = _charuco(board).generateImage((board.columns * s, board.rows * s), marginSize=0, borderBits=1)
+        pattern = charuco_board(board).generateImage((board.columns * s, board.rows * s), marginSize=0, borderBits=1)
         if board.inverted:
             pattern = 255 - pattern
     elif board.type == "aprilgrid":
         tag = _texels(board.tag_m, px_per_m, "tag_m")
         pitch = tag + _texels(board.spacing_m, px_per_m, "spacing_m")
-        d = _dictionary(board)
+        d = aruco_dictionary(board)
         pattern = np.full((board.rows * pitch - pitch + tag, board.columns * pitch - pitch + tag), 255, np.uint8)
         for k in range(board.rows * board.columns):
             r, c = divmod(k, board.columns)

@@ -1,0 +1,549 @@
+"""Chessboard corners without OpenCV's board finders: saddle points, their sub-pixel position
+by point symmetry, and a lattice grown from a seed square with local homographies.
+
+OpenCV's classic detector (``findChessboardCorners``) segments the squares into quadrilaterals and
+fails when strong distortion curves them, blur merges them or the white quiet zone is cut;
+its sector-based detector (``findChessboardCornersSB``, Duda and Frese 2018) fails on strongly
+curved boards too and costs about a second per megapixel. Here:
+
+1. **Saddle points** (Chen and Zhang 2005): at an X-junction of a chessboard the Gaussian-smoothed
+   grey level I has a saddle, ``det(Hessian) < 0``. Local maxima of ``Ixy^2 - Ixx Iyy`` are
+   candidates, placed to sub-pixel by the local quadratic (``-H^-1 grad I``) and kept when the grey
+   levels on small circles around them look like an X-junction: four sign changes about their
+   mean, the second harmonic dominant and the pattern point-symmetric (an X-junction of straight
+   edges is symmetric under a half turn whatever the angle between its lines; an L-corner, an edge
+   or the board's outer border is not).
+2. **Growth** (after Geiger et al. 2012, who grow boards from seed corners): a seed square of
+   four candidates (a corner, its nearest neighbours along its two lines, and the opposite
+   corner) fixes a lattice; each unfilled lattice node next to the grown part is predicted by the
+   homography of the filled nodes within two steps of it and takes the candidate within 0.3 of
+   the local spacing. Local homographies follow strong distortion that a global one cannot.
+3. **Sub-pixel position by point symmetry**: the corner c minimises
+   ``sum_d w(d) (I(c + d) - I(c - d))^2`` over a disc of offsets d (Gauss-Newton on bilinear
+   samples of a lightly smoothed image). Unlike the gradient-orthogonality of ``cornerSubPix``
+   it needs no straight edges over the window, only the half-turn symmetry of the junction.
+
+Pixel coordinates follow docs/conventions.md (origin at the centre of the top-left pixel).
+"""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+from scipy.spatial import cKDTree
+
+__all__ = ["saddle_points", "xjunction_test", "refine_saddles", "grow_lattice", "lattice_spacing", "homography_fit",
+           "apply_homography", "refine_square_corners"]
+
+_N_CIRCLE = 32
+_THETA = np.arange(_N_CIRCLE) * (2.0 * np.pi / _N_CIRCLE)
+
+
+def _float_image(grey: np.ndarray, sigma: float) -> np.ndarray:
+    g = grey.astype(np.float32)
+    return cv2.GaussianBlur(g, (0, 0), sigma) if sigma > 0 else g
+
+
+def xjunction_test(smooth: np.ndarray, p: np.ndarray, radius: float, min_contrast: float = 6.0,
+                   max_odd: float = 0.15, max_first: float = 0.5) -> tuple[np.ndarray, np.ndarray]:
+    """Which points look like chessboard X-junctions on a circle of `radius` px around them.
+
+    Parameters
+    ----------
+    smooth : (H, W) float32
+        Lightly smoothed grey image.
+    p : (n, 2) float
+        Points, pixels.
+    radius : float
+        Circle radius, pixels.
+    min_contrast : float
+        Least amplitude of the second harmonic, grey levels.
+    max_odd : float
+        Largest RMS of the part of the circle's grey levels that a half turn does not preserve,
+        relative to their RMS.
+    max_first : float
+        Largest amplitude of the first harmonic relative to the second.
+
+    Returns
+    -------
+    good : (n,) bool
+    line_angles : (n, 2) float
+        For good points, the directions (rad, in [0, pi)) of the junction's two lines; NaN else.
+    """
+    n = len(p)
+    if n == 0:
+        return np.zeros(0, bool), np.zeros((0, 2))
+    mx = (p[:, 0:1] + radius * np.cos(_THETA)[None]).astype(np.float32)
+    my = (p[:, 1:2] + radius * np.sin(_THETA)[None]).astype(np.float32)
+    v = cv2.remap(smooth, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE).astype(np.float64)
+    v -= v.mean(axis=1, keepdims=True)
+    f = np.fft.rfft(v, axis=1) * (2.0 / _N_CIRCLE)
+    a1, a2 = np.abs(f[:, 1]), np.abs(f[:, 2])
+    rms = np.sqrt((v * v).mean(axis=1)) + 1e-12
+    odd = 0.5 * (v - np.roll(v, _N_CIRCLE // 2, axis=1))
+    odd_ratio = np.sqrt((odd * odd).mean(axis=1)) / rms
+    nxt = np.roll(v, -1, axis=1)
+    cross = (v > 0) != (nxt > 0)
+    good = (a2 > min_contrast) & (a1 < max_first * a2) & (cross.sum(axis=1) == 4) & (odd_ratio < max_odd)
+    angles = np.full((n, 2), np.nan)
+    idx = np.nonzero(good)[0]
+    if len(idx):
+        k = np.nonzero(cross[idx])[1].reshape(-1, 4)                         # the 4 crossings, ascending
+        vk = v[idx[:, None], k]
+        frac = vk / (vk - nxt[idx[:, None], k])
+        a = (k + frac) * (2.0 * np.pi / _N_CIRCLE)
+        # crossings 0 and 2 lie on one line, 1 and 3 on the other: average each pair's direction mod pi
+        for line, (i0, i1) in enumerate(((0, 2), (1, 3))):
+            z = np.exp(2j * a[:, i0]) + np.exp(2j * a[:, i1])
+            angles[idx, line] = (np.angle(z) / 2.0) % np.pi
+    return good, angles
+
+
+def saddle_points(grey: np.ndarray, sigma: float = 1.5, radii=(3.0, 5.0),
+                  max_points: int = 20000) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Chessboard X-junction candidates (Chen and Zhang 2005; module docstring).
+
+    Parameters
+    ----------
+    grey : (H, W) uint8
+    sigma : float
+        Gaussian scale of the saddle response, pixels.
+    radii : sequence of float
+        Circle radii of the X-junction test (a point passes on any of them).
+    max_points : int
+        At most this many local maxima are tested (the strongest).
+
+    Returns
+    -------
+    p : (n, 2) float
+        Candidate positions, pixels (sub-pixel from the local quadratic).
+    score : (n,) float
+        Saddle strength ``Ixy^2 - Ixx Iyy`` of the smoothed image.
+    line_angles : (n, 2) float
+        Directions of each junction's two lines, rad in [0, pi).
+    """
+    g = _float_image(grey, sigma)
+    ixx = cv2.Sobel(g, cv2.CV_32F, 2, 0, ksize=3) * 0.25
+    iyy = cv2.Sobel(g, cv2.CV_32F, 0, 2, ksize=3) * 0.25
+    ixy = cv2.Sobel(g, cv2.CV_32F, 1, 1, ksize=3) * 0.25
+    s = ixy * ixy - ixx * iyy
+    k = 2 * int(np.ceil(1.5 * sigma)) + 1
+    peak = (s == cv2.dilate(s, np.ones((k, k), np.uint8))) & (s > 0)
+    ys, xs = np.nonzero(peak)
+    if len(xs) == 0:
+        return np.zeros((0, 2)), np.zeros(0), np.zeros((0, 2))
+    sv = s[ys, xs]
+    top = np.sort(sv)[-20:]
+    keep = sv > 0.02 * np.median(top)
+    ys, xs, sv = ys[keep], xs[keep], sv[keep]
+    if len(xs) > max_points:
+        order = np.argsort(sv)[-max_points:]
+        ys, xs, sv = ys[order], xs[order], sv[order]
+    gx = cv2.Sobel(g, cv2.CV_32F, 1, 0, ksize=3)[ys, xs] * 0.125
+    gy = cv2.Sobel(g, cv2.CV_32F, 0, 1, ksize=3)[ys, xs] * 0.125
+    a, b, c = ixx[ys, xs], ixy[ys, xs], iyy[ys, xs]
+    det = a * c - b * b
+    with np.errstate(divide="ignore", invalid="ignore"):
+        dx = -(c * gx - b * gy) / det
+        dy = -(a * gy - b * gx) / det
+    step_ok = (np.abs(dx) < 1.0) & (np.abs(dy) < 1.0)
+    p = np.stack([xs + np.where(step_ok, dx, 0.0), ys + np.where(step_ok, dy, 0.0)], axis=1).astype(np.float64)
+    light = _float_image(grey, 0.7)
+    # a loose test first (the strict one needs the junction's centre within a fraction of a pixel),
+    # then the symmetric refinement, then the strict test on every radius
+    loose = xjunction_test(light, p, max(radii), max_odd=np.inf, max_first=1.0)[0]
+    p, sv = p[loose], sv[loose]
+    p, ok = refine_saddles(grey, p, min(radii) + 1.0)
+    p, sv = p[ok], sv[ok]
+    good = np.zeros(len(p), bool)
+    angles = np.full((len(p), 2), np.nan)
+    for r in radii:
+        ok, ang = xjunction_test(light, p, r)
+        new = ok & ~good
+        angles[new] = ang[new]
+        good |= ok
+    p, sv, angles = p[good], sv[good], angles[good]
+    # peaks of one junction that converged together: keep the strongest
+    order = np.argsort(-sv)
+    p, sv, angles = p[order], sv[order], angles[order]
+    keep = np.ones(len(p), bool)
+    if len(p) > 1:
+        for i, j in sorted(cKDTree(p).query_pairs(1.0)):
+            if keep[i] and keep[j]:
+                keep[j] = False
+    return p[keep], sv[keep].astype(np.float64), angles[keep]
+
+
+def refine_saddles(grey: np.ndarray, p, radius_px, iterations: int = 12,
+                   smooth_sigma: float = 0.7) -> tuple[np.ndarray, np.ndarray]:
+    """Sub-pixel X-junction positions by point symmetry (module docstring, step 3).
+
+    Parameters
+    ----------
+    grey : (H, W) uint8
+    p : (n, 2) float
+        Starting positions, pixels (within about a third of `radius_px` of the junction).
+    radius_px : float or (n,) float
+        Radius of the disc of offsets, pixels: smaller than the distance to any other feature.
+    iterations : int
+        Gauss-Newton steps at most.
+    smooth_sigma : float
+        Gaussian smoothing of the image before sampling, pixels.
+
+    Returns
+    -------
+    p_refined : (n, 2) float
+    ok : (n,) bool
+        Converged, moved less than `radius_px` / 2 and stayed inside the image.
+    """
+    p0 = np.asarray(p, dtype=np.float64).reshape(-1, 2)
+    n = len(p0)
+    if n == 0:
+        return p0.copy(), np.zeros(0, bool)
+    radius = np.broadcast_to(np.asarray(radius_px, dtype=np.float64), (n,)).copy()
+    img = _float_image(grey, smooth_sigma)
+    gx = cv2.Sobel(img, cv2.CV_32F, 1, 0, ksize=3) * 0.125
+    gy = cv2.Sobel(img, cv2.CV_32F, 0, 1, ksize=3) * 0.125
+    # unit offsets over a half disc (each pair d, -d once), Gaussian weights
+    u = np.linspace(-1.0, 1.0, 11)
+    ux, uy = np.meshgrid(u, u)
+    half = ((uy > 0) | ((uy == 0) & (ux > 0))) & (ux * ux + uy * uy <= 1.0)
+    ux, uy = ux[half], uy[half]
+    w = np.exp(-(ux * ux + uy * uy) / (2 * 0.5**2))
+    c = p0.copy()
+    active = np.ones(n, bool)
+    h, wd = grey.shape[:2]
+    for _ in range(iterations):
+        if not active.any():
+            break
+        ia = np.nonzero(active)[0]
+        dx = radius[ia, None] * ux[None]
+        dy = radius[ia, None] * uy[None]
+        xp, yp = (c[ia, 0:1] + dx).astype(np.float32), (c[ia, 1:2] + dy).astype(np.float32)
+        xm, ym = (c[ia, 0:1] - dx).astype(np.float32), (c[ia, 1:2] - dy).astype(np.float32)
+        samp = [cv2.remap(im, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE).astype(np.float64)
+                for im in (img, gx, gy) for mx, my in ((xp, yp), (xm, ym))]
+        r = samp[0] - samp[1]
+        jx = samp[2] - samp[3]
+        jy = samp[4] - samp[5]
+        a11 = (w * jx * jx).sum(1)
+        a12 = (w * jx * jy).sum(1)
+        a22 = (w * jy * jy).sum(1)
+        b1 = -(w * jx * r).sum(1)
+        b2 = -(w * jy * r).sum(1)
+        det = a11 * a22 - a12 * a12
+        with np.errstate(divide="ignore", invalid="ignore"):
+            sx = (a22 * b1 - a12 * b2) / det
+            sy = (a11 * b2 - a12 * b1) / det
+        bad = ~np.isfinite(sx) | ~np.isfinite(sy)
+        sx[bad], sy[bad] = 0.0, 0.0
+        step = np.hypot(sx, sy)
+        lim = 0.25 * radius[ia]
+        scale = np.minimum(1.0, lim / np.maximum(step, 1e-12))
+        c[ia, 0] += sx * scale
+        c[ia, 1] += sy * scale
+        done = (step < 1e-3) | bad
+        active[ia[done]] = False
+    moved = np.linalg.norm(c - p0, axis=1)
+    ok = (np.isfinite(c).all(axis=1) & (moved < 0.5 * radius) & (c[:, 0] >= 0) & (c[:, 1] >= 0)
+          & (c[:, 0] <= wd - 1) & (c[:, 1] <= h - 1))
+    return c, ok
+
+
+def homography_fit(src: np.ndarray, dst: np.ndarray) -> np.ndarray | None:
+    """Least-squares homography (normalised DLT with h33 = 1) mapping src (n, 2) to dst (n, 2), n >= 4;
+    None when the points do not determine one."""
+    ms, md = src.mean(axis=0), dst.mean(axis=0)
+    ss = np.sqrt(2.0) / max(np.linalg.norm(src - ms, axis=1).mean(), 1e-12)
+    sd = np.sqrt(2.0) / max(np.linalg.norm(dst - md, axis=1).mean(), 1e-12)
+    a, b = (src - ms) * ss, (dst - md) * sd
+    n = len(a)
+    m = np.zeros((2 * n, 8))
+    m[:n, 0:2], m[:n, 2] = a, 1.0
+    m[n:, 3:5], m[n:, 5] = a, 1.0
+    m[:n, 6:8] = -b[:, 0:1] * a
+    m[n:, 6:8] = -b[:, 1:2] * a
+    sol, _, rank, _ = np.linalg.lstsq(m, np.concatenate([b[:, 0], b[:, 1]]), rcond=None)
+    if rank < 8:
+        return None
+    h = np.append(sol, 1.0).reshape(3, 3)
+    t_src = np.array([[ss, 0, -ss * ms[0]], [0, ss, -ss * ms[1]], [0, 0, 1.0]])
+    t_dst_inv = np.array([[1 / sd, 0, md[0]], [0, 1 / sd, md[1]], [0, 0, 1.0]])
+    return t_dst_inv @ h @ t_src
+
+
+def apply_homography(h: np.ndarray, q: np.ndarray) -> np.ndarray:
+    """Points q (n, 2) mapped by the homography h (3, 3), (n, 2)."""
+    r = np.c_[q, np.ones(len(q))] @ h.T
+    return r[:, :2] / r[:, 2:3]
+
+
+def _angdiff(a, b):
+    d = np.abs((a - b) % np.pi)
+    return np.minimum(d, np.pi - d)
+
+
+def _seed(p: np.ndarray, angles: np.ndarray, tree: cKDTree, s: int) -> dict | None:
+    """A seed square {(i, j): point index} at candidate s, or None."""
+    d, nn = tree.query(p[s], k=min(13, len(p)))
+    nn = nn[1:]
+    v = p[nn] - p[s]
+    va = np.arctan2(v[:, 1], v[:, 0]) % np.pi
+    arms = []
+    for line in (0, 1):
+        m = np.nonzero(_angdiff(va, angles[s, line]) < np.radians(15))[0]
+        if not len(m):
+            return None
+        arms.append(int(nn[m[0]]))                                   # the nearest along this line
+    u, w = p[arms[0]] - p[s], p[arms[1]] - p[s]
+    dd, k = tree.query(p[s] + u + w)
+    if dd > 0.3 * min(np.linalg.norm(u), np.linalg.norm(w)) or k in (s, *arms):
+        return None
+    return {(0, 0): s, (1, 0): arms[0], (0, 1): arms[1], (1, 1): int(k)}
+
+
+def _grow(p: np.ndarray, angles: np.ndarray, tree: cKDTree, grid: dict, max_nodes: int) -> dict:
+    """Grow `grid` node by node (module docstring, step 2)."""
+    used = set(grid.values())
+    steps = ((1, 0), (-1, 0), (0, 1), (0, -1))
+    tried: dict = {}                                 # node -> number of nearby filled nodes when last tried
+    queue = sorted({(i + di, j + dj) for (i, j) in grid for di, dj in steps} - grid.keys())
+    while queue and len(grid) < max_nodes:
+        node = queue.pop(0)
+        if node in grid:
+            continue
+        near = [k for k in grid if abs(k[0] - node[0]) <= 2 and abs(k[1] - node[1]) <= 2]
+        if len(near) < 4 or tried.get(node) == len(near):
+            continue
+        tried[node] = len(near)
+        src = np.array(near, dtype=np.float64)
+        cov = np.cov(src.T)
+        if np.linalg.eigvalsh(cov)[0] < 0.05:                       # all on one lattice line
+            continue
+        h = homography_fit(src, p[[grid[k] for k in near]])
+        if h is None:
+            continue
+        q = apply_homography(h, np.array([node, (node[0] + 1, node[1]), (node[0], node[1] + 1)], dtype=np.float64))
+        spacing = min(np.linalg.norm(q[1] - q[0]), np.linalg.norm(q[2] - q[0]))
+        if not np.isfinite(spacing):
+            continue
+        (d1, d2), (k, _) = tree.query(q[0], k=2)
+        k = int(k)
+        if k in used or d1 > 0.45 * spacing or d1 > 0.5 * d2:
+            continue
+        if d1 > 0.25 * spacing:            # far from the prediction (strong distortion): the lines must agree
+            dirs = np.arctan2(*(q[1:] - q[0])[:, ::-1].T) % np.pi
+            if not (_angdiff(np.sort(angles[k]), np.sort(dirs)).max() < np.radians(20)
+                    or _angdiff(np.sort(angles[k])[::-1], np.sort(dirs)).max() < np.radians(20)):
+                continue
+        grid[node] = k
+        used.add(k)
+        for di in range(-2, 3):                                      # neighbours may now be predictable
+            for dj in range(-2, 3):
+                nb = (node[0] + di, node[1] + dj)
+                if nb not in grid and (abs(di) + abs(dj) == 1 or nb in tried):
+                    queue.append(nb)
+    return grid
+
+
+def _fill(win: np.ndarray, grey: np.ndarray, light: np.ndarray, p: np.ndarray, tree: cKDTree) -> np.ndarray | None:
+    """Fill the missing nodes of a (rows, cols, 2) window: the candidate nearest to the local
+    homography's prediction (within 0.45 of the spacing), else the prediction itself, kept where
+    the symmetric refinement converges on an X-junction; None when a node has none."""
+    for y, x in np.argwhere(np.isnan(win[..., 0])):
+        have = np.argwhere(~np.isnan(win[..., 0]))
+        near = have[np.abs(have - (y, x)).max(axis=1) <= 2]
+        if len(near) < 4:
+            return None
+        h = homography_fit(near[:, ::-1].astype(np.float64), win[near[:, 0], near[:, 1]])
+        if h is None:
+            return None
+        q = apply_homography(h, np.array([(x, y), (x + 1, y), (x, y + 1)], dtype=np.float64))
+        spacing = min(np.linalg.norm(q[1] - q[0]), np.linalg.norm(q[2] - q[0]))
+        d, k = tree.query(q[0])
+        start = p[k:k + 1] if d < 0.45 * spacing else q[:1]
+        r, ok = refine_saddles(grey, start, 4.0)
+        if not ok[0] or not (xjunction_test(light, r, 3.0)[0][0] or xjunction_test(light, r, 5.0)[0][0]):
+            return None
+        if np.linalg.norm(win[near[:, 0], near[:, 1]] - r[0], axis=1).min() < 0.3 * spacing:
+            return None                                                   # that junction is taken
+        win[y, x] = r[0]
+    return win
+
+
+def grow_lattice(grey: np.ndarray, cols: int, rows: int, *, max_seeds: int = 12, sigma: float = 1.5,
+                 points: tuple | None = None) -> np.ndarray | None:
+    """A chessboard's inner corners as a lattice grown from saddle points (module docstring).
+
+    Parameters
+    ----------
+    grey : (H, W) uint8
+    cols, rows : int
+        Inner corners along the board's x and y.
+    max_seeds : int
+        Seed squares tried (strongest saddles first).
+    sigma : float
+        Scale of the saddle response, pixels.
+    points : tuple, optional
+        `saddle_points` (grey, sigma) when already computed.
+
+    Returns
+    -------
+    (rows, cols, 2) float or None
+        Pixel positions, in lattice order (not yet oriented: the caller fixes which corner is
+        the board's first), or None when no seed grows into exactly one cols x rows block.
+    """
+    p, score, angles = saddle_points(grey, sigma) if points is None else points
+    if len(p) < 0.8 * cols * rows:
+        return None
+    tree = cKDTree(p)
+    light = _float_image(grey, 0.7)
+    seeds = 0
+    covered: set = set()
+    for s in np.argsort(-score):
+        if seeds >= max_seeds:
+            break
+        if s in covered:
+            continue
+        grid = _seed(p, angles, tree, int(s))
+        if grid is None:
+            continue
+        seeds += 1
+        grid = _grow(p, angles, tree, grid, max_nodes=4 * cols * rows)
+        covered |= set(grid.values())
+        keys = np.array(list(grid.keys()))
+        lo = keys.min(axis=0)
+        arr = np.full(tuple(keys.max(axis=0) - lo + 1)[::-1] + (2,), np.nan)
+        for (i, j), k in grid.items():
+            arr[j - lo[1], i - lo[0]] = p[k]
+        for a in (arr, arr.transpose(1, 0, 2)):
+            full = ~np.isnan(a[..., 0])
+            ny, nx = full.shape
+            if ny < rows or nx < cols:
+                continue
+            csum = np.pad(full.cumsum(0).cumsum(1), ((1, 0), (1, 0)))
+            cnt = csum[rows:, cols:] - csum[:-rows, cols:] - csum[rows:, :-cols] + csum[:-rows, :-cols]
+            best = cnt.max()
+            if best < rows * cols - 3 or (cnt == best).sum() != 1:
+                continue
+            y, x = np.argwhere(cnt == best)[0]
+            win = a[y:y + rows, x:x + cols].copy()
+            if best < rows * cols:
+                win = _fill(win, grey, light, p, tree)
+            if win is not None:
+                return win
+    return None
+
+
+def lattice_spacing(grid: np.ndarray) -> np.ndarray:
+    """Distance from each node of a (rows, cols, 2) lattice to its nearest 4-neighbour, (rows, cols) px."""
+    d = np.full(grid.shape[:2], np.inf)
+    dx = np.linalg.norm(np.diff(grid, axis=1), axis=2)
+    dy = np.linalg.norm(np.diff(grid, axis=0), axis=2)
+    d[:, :-1] = np.minimum(d[:, :-1], dx)
+    d[:, 1:] = np.minimum(d[:, 1:], dx)
+    d[:-1] = np.minimum(d[:-1], dy)
+    d[1:] = np.minimum(d[1:], dy)
+    return d
+
+
+def refine_square_corners(grey: np.ndarray, corners, inner_px, outer_px, *, positions: int = 21,
+                          samples: int = 33, iterations: int = 2) -> tuple[np.ndarray, np.ndarray]:
+    """Corners of dark squares on a bright ground (AprilTags) as intersections of their edges.
+
+    Each side of a square is located along its normal at `positions` places between 15 % and
+    85 % of its length (the maximum of the grey-level gradient on a profile reaching `inner_px`
+    into the square and `outer_px` out of it, placed to sub-pixel by a parabola), the side's
+    offsets are fitted by a quadratic in the position along it (lens distortion bends it), and
+    each corner is where the tangents of its two sides' curves meet. A symmetric blur moves an
+    edge nowhere, so unlike a gradient-orthogonality refinement (``cornerSubPix``) on an
+    L-shaped corner the result is not pulled into the square by the blur.
+
+    Parameters
+    ----------
+    grey : (H, W) uint8
+    corners : (T, 4, 2) float
+        Rough corners of T squares, clockwise in the image (ArUco order), pixels.
+    inner_px, outer_px : float or (T,) float
+        How far the profiles reach inside (within the dark border) and outside, pixels.
+    positions, samples : int
+        Profiles per side and samples per profile.
+    iterations : int
+        Rounds (each re-fits the sides from the corners of the last).
+
+    Returns
+    -------
+    corners : (T, 4, 2) float
+    ok : (T, 4) bool
+        Both sides fitted and the corner moved less than a tenth of the square's side (>= 2 px).
+    """
+    c = np.asarray(corners, dtype=np.float64).reshape(-1, 4, 2).copy()
+    t_n = len(c)
+    if t_n == 0:
+        return c, np.zeros((0, 4), bool)
+    c0 = c.copy()
+    inner = np.broadcast_to(np.asarray(inner_px, dtype=np.float64), (t_n,))
+    outer = np.broadcast_to(np.asarray(outer_px, dtype=np.float64), (t_n,))
+    light = _float_image(grey, 0.7)
+    s = np.linspace(0.15, 0.85, positions)
+    u = np.linspace(0.0, 1.0, samples)
+    ok = np.ones((t_n, 4), bool)
+    for _ in range(iterations):
+        a, b = c, np.roll(c, -1, axis=1)                                          # side k: a[k] -> b[k]
+        e = b - a
+        length = np.linalg.norm(e, axis=2, keepdims=True)
+        e = e / length
+        n = np.stack([e[..., 1], -e[..., 0]], axis=-1)                            # outward normal
+        t = -inner[:, None, None] + (inner + outer)[:, None, None] * u[None, None, :]   # (T, 1, P)
+        base = a[:, :, None, :] + s[None, None, :, None] * (b - a)[:, :, None, :]       # (T, 4, M, 2)
+        pts = base[..., None, :] + t[:, :, None, :, None] * n[:, :, None, None, :]     # (T, 4, M, P, 2)
+        flat = pts.reshape(-1, samples, 2).astype(np.float32)
+        prof = cv2.remap(light, flat[..., 0], flat[..., 1], cv2.INTER_LINEAR,
+                         borderMode=cv2.BORDER_REPLICATE).astype(np.float64)
+        g = np.gradient(prof, axis=1)                                               # dark -> bright: > 0
+        k = np.argmax(g, axis=1)
+        r = np.arange(len(g))
+        g0 = g[r, k]
+        # centroid of the gradient over the run of samples around the peak above a fifth of it
+        idx = np.arange(samples)[None]
+        low = g < 0.2 * g0[:, None]
+        left = np.where(low & (idx < k[:, None]), idx, -1).max(axis=1) + 1
+        right = np.where(low & (idx > k[:, None]), idx, samples).min(axis=1) - 1
+        run = (idx >= left[:, None]) & (idx <= right[:, None])
+        gw = np.where(run, g - 0.2 * g0[:, None], 0.0)
+        frac = (gw * (idx - k[:, None])).sum(axis=1) / np.maximum(gw.sum(axis=1), 1e-12)
+        step = (inner + outer) / (samples - 1)                                      # (T,) px per sample
+        pos = (k + frac).reshape(t_n, 4, positions)
+        off = -inner[:, None, None] + pos * step[:, None, None]                       # edge offset along n, px
+        contrast = (g0 > 3.0).reshape(t_n, 4, positions)
+        # quadratic fit of the offsets in s (least squares; positions without an edge left out)
+        vand = np.stack([np.ones_like(s), s, s * s], axis=1)                        # (M, 3)
+        w = contrast.astype(np.float64)
+        ata = np.einsum("tkm,mi,mj->tkij", w, vand, vand)
+        atb = np.einsum("tkm,mi,tkm->tki", w, vand, off)
+        enough = w.sum(axis=2) >= 5
+        ata[~enough] = np.eye(3)
+        coef = np.linalg.solve(ata, atb[..., None])[..., 0]                           # (T, 4, 3)
+        ok &= enough & np.roll(enough, 1, axis=1)         # corner k joins side k and side k - 1
+        # side k at s = 0 (start: corner k) and side k - 1 at s = 1 (end: corner k)
+        def point_dir(kk, s_at):
+            cf = coef[:, kk]
+            off_s = cf[:, 0] + cf[:, 1] * s_at + cf[:, 2] * s_at**2
+            d_off = cf[:, 1] + 2 * cf[:, 2] * s_at
+            seg = (b - a)[:, kk]
+            return a[:, kk] + s_at * seg + off_s[:, None] * n[:, kk], seg + d_off[:, None] * n[:, kk]
+        new = np.empty_like(c)
+        for kk in range(4):
+            pa, da = point_dir(kk, 0.0)
+            pb, db = point_dir((kk - 1) % 4, 1.0)
+            m = np.stack([da, -db], axis=2)                                           # (T, 2, 2)
+            det = np.linalg.det(m)
+            good = np.abs(det) > 1e-9
+            m[~good] = np.eye(2)
+            alpha = np.linalg.solve(m, (pb - pa)[..., None])[:, 0, 0]
+            new[:, kk] = np.where(good[:, None], pa + alpha[:, None] * da, c[:, kk])
+            ok[:, kk] &= good
+        c = np.where(ok[..., None], new, c)
+    side = np.linalg.norm(c0 - np.roll(c0, -1, axis=1), axis=2).mean(axis=1)
+    ok &= np.isfinite(c).all(axis=2) & (np.linalg.norm(c - c0, axis=2) < np.maximum(2.0, 0.1 * side)[:, None])
+    return c, ok
