@@ -44,8 +44,7 @@ from scipy.spatial import cKDTree
 
 from ..errors import InputError
 from ..types import BOARD_TYPES, Board
-from .corners import (apply_homography, grow_lattice, homography_fit, lattice_spacing, refine_saddles,
-                      refine_square_corners, saddle_points)
+from .corners import grow_lattice, lattice_spacing, predict_nodes, refine_saddles, refine_square_corners, saddle_points
 
 __all__ = ["BoardDetection", "APRILTAG_DICTIONARIES", "aruco_dictionary", "charuco_board", "board_points",
            "board_symmetry", "grey_image", "detect_board"]
@@ -292,25 +291,15 @@ def _inconsistent(ij: np.ndarray, xy: np.ndarray) -> np.ndarray:
     the points within two squares (board grid units `ij`) above 0.25 of the local spacing where
     the point is surrounded (interpolated), above 0.5 at the edge of what was seen (extrapolated,
     which strong distortion bends). A misassembled lattice is off by about one spacing."""
-    tree = cKDTree(ij)
-    known = {tuple(q) for q in np.rint(ij).astype(int)}
-    bad = np.zeros(len(ij), bool)
-    for n, nb in enumerate(tree.query_ball_point(ij, 2.0 + 1e-9, p=np.inf)):
-        nb = [k for k in nb if k != n]
-        if len(nb) < 5:
-            continue
-        src = ij[nb]
-        if np.linalg.eigvalsh(np.cov(src.T))[0] < 0.05:
-            continue
-        h = homography_fit(src, xy[nb])
-        if h is None:
-            continue
-        q = apply_homography(h, np.array([ij[n], ij[n] + (1, 0), ij[n] + (0, 1)]))
-        spacing = min(np.linalg.norm(q[1] - q[0]), np.linalg.norm(q[2] - q[0]))
-        i, j = np.rint(ij[n]).astype(int)
-        inside = all(q in known for q in ((i - 1, j), (i + 1, j), (i, j - 1), (i, j + 1)))
-        bad[n] = np.linalg.norm(q[0] - xy[n]) > (0.25 if inside else 0.5) * spacing
-    return bad
+    q, ok = predict_nodes(ij, ij, xy)
+    spacing = np.minimum(np.linalg.norm(q[:, 1] - q[:, 0], axis=1), np.linalg.norm(q[:, 2] - q[:, 0], axis=1))
+    err = np.linalg.norm(q[:, 0] - xy, axis=1)
+    r = np.rint(ij).astype(np.int64)
+    known = set(map(tuple, r.tolist()))
+    inside = np.array([all(n in known for n in ((i - 1, j), (i + 1, j), (i, j - 1), (i, j + 1))) for i, j in r.tolist()],
+                      dtype=bool)
+    with np.errstate(invalid="ignore"):
+        return ok & (err > np.where(inside, 0.25, 0.5) * spacing)
 
 
 def _finish_chessboard(grey: np.ndarray, grid: np.ndarray, board: Board) -> np.ndarray | None:

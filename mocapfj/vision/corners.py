@@ -32,8 +32,8 @@ import cv2
 import numpy as np
 from scipy.spatial import cKDTree
 
-__all__ = ["saddle_points", "xjunction_test", "refine_saddles", "grow_lattice", "lattice_spacing", "homography_fit",
-           "apply_homography", "refine_square_corners"]
+__all__ = ["saddle_points", "xjunction_test", "refine_saddles", "grow_lattice", "lattice_spacing", "predict_nodes",
+           "refine_square_corners"]
 
 _N_CIRCLE = 32
 _THETA = np.arange(_N_CIRCLE) * (2.0 * np.pi / _N_CIRCLE)
@@ -201,7 +201,19 @@ def refine_saddles(grey: np.ndarray, p, radius_px, iterations: int = 12,
     if n == 0:
         return p0.copy(), np.zeros(0, bool)
     radius = np.broadcast_to(np.asarray(radius_px, dtype=np.float64), (n,)).copy()
-    img = _float_image(grey, smooth_sigma)
+    h, wd = grey.shape[:2]
+    # work on the region the offsets can reach (plus the smoothing's support)
+    pad = 1.5 * radius.max() + 4.0 * smooth_sigma + 4.0
+    x0 = int(max(0, np.floor(np.nanmin(p0[:, 0]) - pad)))
+    y0 = int(max(0, np.floor(np.nanmin(p0[:, 1]) - pad)))
+    x1 = int(min(wd, np.ceil(np.nanmax(p0[:, 0]) + pad) + 1))
+    y1 = int(min(h, np.ceil(np.nanmax(p0[:, 1]) + pad) + 1))
+    if x1 - x0 < 3 or y1 - y0 < 3:
+        return p0.copy(), np.zeros(n, bool)
+    origin = np.array([x0, y0], dtype=np.float64)
+    p_img = p0
+    p0 = p0 - origin
+    img = _float_image(grey[y0:y1, x0:x1], smooth_sigma)
     gx = cv2.Sobel(img, cv2.CV_32F, 1, 0, ksize=3) * 0.125
     gy = cv2.Sobel(img, cv2.CV_32F, 0, 1, ksize=3) * 0.125
     # unit offsets over a half disc (each pair d, -d once), Gaussian weights
@@ -212,7 +224,6 @@ def refine_saddles(grey: np.ndarray, p, radius_px, iterations: int = 12,
     w = np.exp(-(ux * ux + uy * uy) / (2 * 0.5**2))
     c = p0.copy()
     active = np.ones(n, bool)
-    h, wd = grey.shape[:2]
     for _ in range(iterations):
         if not active.any():
             break
@@ -245,37 +256,11 @@ def refine_saddles(grey: np.ndarray, p, radius_px, iterations: int = 12,
         done = (step < 1e-3) | bad
         active[ia[done]] = False
     moved = np.linalg.norm(c - p0, axis=1)
+    c = c + origin
     ok = (np.isfinite(c).all(axis=1) & (moved < 0.5 * radius) & (c[:, 0] >= 0) & (c[:, 1] >= 0)
           & (c[:, 0] <= wd - 1) & (c[:, 1] <= h - 1))
+    c[~np.isfinite(c).all(axis=1)] = p_img[~np.isfinite(c).all(axis=1)]
     return c, ok
-
-
-def homography_fit(src: np.ndarray, dst: np.ndarray) -> np.ndarray | None:
-    """Least-squares homography (normalised DLT with h33 = 1) mapping src (n, 2) to dst (n, 2), n >= 4;
-    None when the points do not determine one."""
-    ms, md = src.mean(axis=0), dst.mean(axis=0)
-    ss = np.sqrt(2.0) / max(np.linalg.norm(src - ms, axis=1).mean(), 1e-12)
-    sd = np.sqrt(2.0) / max(np.linalg.norm(dst - md, axis=1).mean(), 1e-12)
-    a, b = (src - ms) * ss, (dst - md) * sd
-    n = len(a)
-    m = np.zeros((2 * n, 8))
-    m[:n, 0:2], m[:n, 2] = a, 1.0
-    m[n:, 3:5], m[n:, 5] = a, 1.0
-    m[:n, 6:8] = -b[:, 0:1] * a
-    m[n:, 6:8] = -b[:, 1:2] * a
-    sol, _, rank, _ = np.linalg.lstsq(m, np.concatenate([b[:, 0], b[:, 1]]), rcond=None)
-    if rank < 8:
-        return None
-    h = np.append(sol, 1.0).reshape(3, 3)
-    t_src = np.array([[ss, 0, -ss * ms[0]], [0, ss, -ss * ms[1]], [0, 0, 1.0]])
-    t_dst_inv = np.array([[1 / sd, 0, md[0]], [0, 1 / sd, md[1]], [0, 0, 1.0]])
-    return t_dst_inv @ h @ t_src
-
-
-def apply_homography(h: np.ndarray, q: np.ndarray) -> np.ndarray:
-    """Points q (n, 2) mapped by the homography h (3, 3), (n, 2)."""
-    r = np.c_[q, np.ones(len(q))] @ h.T
-    return r[:, :2] / r[:, 2:3]
 
 
 def _angdiff(a, b):
@@ -302,47 +287,105 @@ def _seed(p: np.ndarray, angles: np.ndarray, tree: cKDTree, s: int) -> dict | No
     return {(0, 0): s, (1, 0): arms[0], (0, 1): arms[1], (1, 1): int(k)}
 
 
+def predict_nodes(nodes, known_ij, known_xy, reach: int = 2) -> tuple[np.ndarray, np.ndarray]:
+    """Lattice nodes predicted by the local homographies of known nodes around them.
+
+    For each node, the homography (normalised DLT with h33 = 1) of the known nodes within
+    `reach` lattice steps (Chebyshev distance; the node itself left out) gives its image position
+    and those of the nodes one step along each lattice axis. All nodes are solved at once.
+
+    Parameters
+    ----------
+    nodes : (F, 2) float
+        Lattice coordinates (i, j) to predict.
+    known_ij : (K, 2) float
+        Lattice coordinates of the known nodes.
+    known_xy : (K, 2) float
+        Their image positions, pixels.
+    reach : int
+
+    Returns
+    -------
+    q : (F, 3, 2) float
+        Predicted pixels of node, node + (1, 0) and node + (0, 1).
+    ok : (F,) bool
+        At least 4 known nodes around it, not all on one lattice line.
+    """
+    nodes = np.asarray(nodes, dtype=np.float64).reshape(-1, 2)
+    kij = np.asarray(known_ij, dtype=np.float64).reshape(-1, 2)
+    kxy = np.asarray(known_xy, dtype=np.float64).reshape(-1, 2)
+    f = len(nodes)
+    q = np.full((f, 3, 2), np.nan)
+    if f == 0 or len(kij) == 0:
+        return q, np.zeros(f, bool)
+    d = kij[None] - nodes[:, None]                                           # (F, K, 2) node-centred
+    m = (np.abs(d).max(axis=2) <= reach) & (np.abs(d).max(axis=2) > 0)
+    w = m.astype(np.float64)
+    n = w.sum(axis=1)
+    ok = n >= 4
+    nn = np.maximum(n, 1.0)
+    mu = (w[..., None] * d).sum(axis=1) / nn[:, None]
+    du = d - mu[:, None]
+    c = np.einsum("fk,fki,fkj->fij", w, du, du) / nn[:, None, None]
+    ok &= np.linalg.eigvalsh(c)[:, 0] > 0.05                                 # not all on one line
+    mx = (w[..., None] * kxy[None]).sum(axis=1) / nn[:, None]
+    dist = np.linalg.norm(kxy[None] - mx[:, None], axis=2)
+    sc = np.sqrt(2.0) / np.maximum((w * dist).sum(axis=1) / nn, 1e-12)
+    x = (kxy[None] - mx[:, None]) * sc[:, None, None]                         # (F, K, 2) normalised
+    u, v = d[..., 0], d[..., 1]
+    one, zero = np.ones_like(u), np.zeros_like(u)
+    r1 = np.stack([u, v, one, zero, zero, zero, -u * x[..., 0], -v * x[..., 0]], axis=-1)
+    r2 = np.stack([zero, zero, zero, u, v, one, -u * x[..., 1], -v * x[..., 1]], axis=-1)
+    ata = np.einsum("fk,fki,fkj->fij", w, r1, r1) + np.einsum("fk,fki,fkj->fij", w, r2, r2)
+    atb = np.einsum("fk,fki->fi", w * x[..., 0], r1) + np.einsum("fk,fki->fi", w * x[..., 1], r2)
+    ata[~ok] = np.eye(8)
+    ata += np.eye(8)[None] * (1e-12 * np.trace(ata, axis1=1, axis2=2))[:, None, None]
+    h = np.linalg.solve(ata, atb[..., None])[..., 0]                          # (F, 8)
+    for col, (a, b) in enumerate(((0.0, 0.0), (1.0, 0.0), (0.0, 1.0))):
+        den = h[:, 6] * a + h[:, 7] * b + 1.0
+        q[:, col, 0] = (h[:, 0] * a + h[:, 1] * b + h[:, 2]) / den / sc + mx[:, 0]
+        q[:, col, 1] = (h[:, 3] * a + h[:, 4] * b + h[:, 5]) / den / sc + mx[:, 1]
+    ok &= np.isfinite(q).all(axis=(1, 2))
+    return q, ok
+
+
 def _grow(p: np.ndarray, angles: np.ndarray, tree: cKDTree, grid: dict, max_nodes: int) -> dict:
-    """Grow `grid` node by node (module docstring, step 2)."""
+    """Grow `grid` {(i, j): candidate} round by round (module docstring, step 2)."""
     used = set(grid.values())
-    steps = ((1, 0), (-1, 0), (0, 1), (0, -1))
-    tried: dict = {}                                 # node -> number of nearby filled nodes when last tried
-    queue = sorted({(i + di, j + dj) for (i, j) in grid for di, dj in steps} - grid.keys())
-    while queue and len(grid) < max_nodes:
-        node = queue.pop(0)
-        if node in grid:
-            continue
-        near = [k for k in grid if abs(k[0] - node[0]) <= 2 and abs(k[1] - node[1]) <= 2]
-        if len(near) < 4 or tried.get(node) == len(near):
-            continue
-        tried[node] = len(near)
-        src = np.array(near, dtype=np.float64)
-        cov = np.cov(src.T)
-        if np.linalg.eigvalsh(cov)[0] < 0.05:                       # all on one lattice line
-            continue
-        h = homography_fit(src, p[[grid[k] for k in near]])
-        if h is None:
-            continue
-        q = apply_homography(h, np.array([node, (node[0] + 1, node[1]), (node[0], node[1] + 1)], dtype=np.float64))
-        spacing = min(np.linalg.norm(q[1] - q[0]), np.linalg.norm(q[2] - q[0]))
-        if not np.isfinite(spacing):
-            continue
-        (d1, d2), (k, _) = tree.query(q[0], k=2)
-        k = int(k)
-        if k in used or d1 > 0.45 * spacing or d1 > 0.5 * d2:
-            continue
-        if d1 > 0.25 * spacing:            # far from the prediction (strong distortion): the lines must agree
-            dirs = np.arctan2(*(q[1:] - q[0])[:, ::-1].T) % np.pi
-            if not (_angdiff(np.sort(angles[k]), np.sort(dirs)).max() < np.radians(20)
-                    or _angdiff(np.sort(angles[k])[::-1], np.sort(dirs)).max() < np.radians(20)):
-                continue
-        grid[node] = k
-        used.add(k)
-        for di in range(-2, 3):                                      # neighbours may now be predictable
-            for dj in range(-2, 3):
-                nb = (node[0] + di, node[1] + dj)
-                if nb not in grid and (abs(di) + abs(dj) == 1 or nb in tried):
-                    queue.append(nb)
+    tried: dict = {}                      # node -> nearby known nodes when it last failed
+    steps = np.array([(1, 0), (-1, 0), (0, 1), (0, -1)])
+    while len(grid) < max_nodes:
+        keys = np.array(list(grid.keys()), dtype=np.float64)
+        xy = p[list(grid.values())]
+        front = {tuple(k) for k in (keys[:, None] + steps[None]).reshape(-1, 2).astype(int).tolist()} - grid.keys()
+        front = np.array(sorted(front), dtype=np.float64)
+        near = (np.abs(keys[None] - front[:, None]).max(axis=2) <= 2).sum(axis=1)
+        fresh = np.array([tried.get(tuple(int(c) for c in n)) != k for n, k in zip(front, near)])
+        front, near = front[fresh], near[fresh]
+        if not len(front):
+            break
+        q, ok = predict_nodes(front, keys, xy)
+        spacing = np.minimum(np.linalg.norm(q[:, 1] - q[:, 0], axis=1), np.linalg.norm(q[:, 2] - q[:, 0], axis=1))
+        dd, kk = tree.query(np.where(ok[:, None], q[:, 0], 0.0), k=2)
+        d1, d2, k = dd[:, 0], dd[:, 1], kk[:, 0]
+        good = ok & np.isfinite(spacing) & (d1 <= 0.45 * spacing) & (d1 <= 0.5 * d2)
+        good &= ~np.isin(k, list(used))
+        # far from the prediction (strong distortion): the junction's lines must follow the lattice
+        dirs = np.sort(np.arctan2(q[:, 1:, 1] - q[:, :1, 1], q[:, 1:, 0] - q[:, :1, 0]) % np.pi, axis=1)
+        cand = np.sort(angles[k], axis=1)
+        lines_ok = (_angdiff(cand, dirs).max(axis=1) < np.radians(20))
+        good &= (d1 <= 0.25 * spacing) | lines_ok
+        added = 0
+        for f in np.argsort(d1 / np.where(spacing > 0, spacing, np.inf)):
+            node = tuple(int(c) for c in front[f])
+            if good[f] and int(k[f]) not in used:
+                grid[node] = int(k[f])
+                used.add(int(k[f]))
+                added += 1
+            elif not good[f]:
+                tried[node] = near[f]
+        if not added:
+            break
     return grid
 
 
@@ -352,20 +395,17 @@ def _fill(win: np.ndarray, grey: np.ndarray, light: np.ndarray, p: np.ndarray, t
     the symmetric refinement converges on an X-junction; None when a node has none."""
     for y, x in np.argwhere(np.isnan(win[..., 0])):
         have = np.argwhere(~np.isnan(win[..., 0]))
-        near = have[np.abs(have - (y, x)).max(axis=1) <= 2]
-        if len(near) < 4:
+        q, ok = predict_nodes([(x, y)], have[:, ::-1], win[have[:, 0], have[:, 1]])
+        if not ok[0]:
             return None
-        h = homography_fit(near[:, ::-1].astype(np.float64), win[near[:, 0], near[:, 1]])
-        if h is None:
-            return None
-        q = apply_homography(h, np.array([(x, y), (x + 1, y), (x, y + 1)], dtype=np.float64))
+        q = q[0]
         spacing = min(np.linalg.norm(q[1] - q[0]), np.linalg.norm(q[2] - q[0]))
         d, k = tree.query(q[0])
         start = p[k:k + 1] if d < 0.45 * spacing else q[:1]
         r, ok = refine_saddles(grey, start, 4.0)
         if not ok[0] or not (xjunction_test(light, r, 3.0)[0][0] or xjunction_test(light, r, 5.0)[0][0]):
             return None
-        if np.linalg.norm(win[near[:, 0], near[:, 1]] - r[0], axis=1).min() < 0.3 * spacing:
+        if np.linalg.norm(win[have[:, 0], have[:, 1]] - r[0], axis=1).min() < 0.3 * spacing:
             return None                                                   # that junction is taken
         win[y, x] = r[0]
     return win
