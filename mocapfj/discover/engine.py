@@ -7,16 +7,17 @@ show the fit improve (issue "mismatch discovery"; docs/discovery.md).
    residual (spring or link), time windows, state regions, frequency bands, whiteness and the
    cross-correlation with the inputs at each lag, each with its strength and significance.
 3. Name and model: every effect of the library (:mod:`.effects`) is fitted on the first part of
-   the trial and scored on the held-out rest: the torque it explains there, sqrt(RSS_before -
-   RSS_after) / sqrt(n), an F test with the residual's effective sample count (its
-   autocorrelation counted), Bonferroni-corrected over the effects tried, and a held-out
-   information criterion n_eff ln(RSS_after / RSS_before) + p ln(n_eff). Among the significant
-   effects the one with the lowest criterion (the largest gain for its complexity) is added to
-   the model, the residuals recomputed, and the search repeated until nothing significant is left
-   (or the residuals are white); the chosen effects are refitted on the whole trial. When none is
-   significant, the weakly significant ones (SCREEN) and those output error can refit
-   (REFINE_TRIES) are refitted by output error on the trial and simulated on the held-out
-   evidence; the one that raises its fit most, by more than GAIN_SDS noise SDs, is added.
+   the trial and scored on the held-out rest by equation error: the torque it explains there,
+   sqrt(RSS_before - RSS_after) / sqrt(n), an F test with the residual's effective sample count
+   (its autocorrelation counted), Bonferroni-corrected over the effects tried, and a held-out
+   information criterion n_eff ln(RSS_after / RSS_before) + p ln(n_eff). The leading candidates
+   (significant at SCREEN, or refittable by output error; :data:`.tournament.POOL_SIZE` by the
+   criterion) are refitted by output error on the trial's first part and judged against each other
+   on the held-out evidence, the trial's last part and the validation recording
+   (:mod:`.tournament`); the admissible one with the largest held-out gain is added (among those
+   the noise cannot tell from it, the clearest equation-error signature), refitted on the whole
+   trial, the residuals recomputed, and the search repeated until nothing admissible is left (or
+   the residuals are white).
 4. Re-identify (:mod:`.reident`): each joint identified again by output error with its nominal
    parameters free and the effects that estimator fits (stiffening, hysteresis, clock offset);
    its effects named when they beat the same re-identification without them by GAIN_SDS noise
@@ -32,7 +33,6 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from scipy import stats
-from scipy.optimize import minimize
 
 from ..errors import InputError
 from ..types import JointSignals
@@ -40,6 +40,7 @@ from ..ident.conditioning import derivatives, lowpass
 from .effects import EFFECTS, FITTERS, SPRING_EFFECTS, Candidate
 from .model import simulate_joint
 from .reident import REID_EFFECTS
+from .tournament import Judge, pool, score_dict
 from .residuals import Families, families
 
 __all__ = ["Discovery", "discover", "locate", "effective_n", "GAP_POINTS", "GAIN_MIN_POINTS"]
@@ -51,20 +52,12 @@ GAIN_SDS = 3.0
 """An effect the re-identification fits is named when it raises the held-out fit by more than this
 many SDs of that change the recording's noise gives (:meth:`.model.OutputError.change_sd`)."""
 SCREEN = 0.01
-"""An effect whose equation-error test is not significant at `alpha` but is at this level (after
-the same Bonferroni correction) is tried on the held-out output-error fit, which it must then raise
-by GAIN_SDS noise SDs."""
-SCREEN_TRIES = 3
-"""At most this many such effects (lowest held-out criterion first) simulated per step."""
-REFINE_TRIES = 3
-"""When nothing passes the screen either, at most this many effects that output error can refit
-(lowest held-out criterion first) are refitted by it on the trial and gated like the screened."""
-REFINE_EVALS_PER_PARAMETER = 20
-"""Simulations per parameter of such a refit (Nelder-Mead)."""
+"""An effect whose equation-error test is significant at this level (after the Bonferroni
+correction), or one output error can refit, is judged by the simulation (:mod:`.tournament`)."""
 WEAK_MIN_POINTS = 0.1
-"""A screened or refitted effect must also raise the held-out fit by this many points: on a light
-cobot control of the grid (seed 19000) a free play refitted to zero width with the spring 0.6 %
-softer raised it by 0.02 points at 5 noise SDs, the simulators' own small difference, not physics."""
+"""An effect must raise the held-out fit by this many points: on a light cobot control of the grid
+(seed 19000) a free play refitted to zero width with the spring 0.6 % softer raised it by 0.02
+points at 5 noise SDs, the simulators' own small difference, not physics."""
 GAP_POINTS = 1.0
 """A model whose in-band fit of the deflection or of the torque stays more than this many points
 (or two SDs of that floor, when those are more) below the recording's noise floor leaves a
@@ -343,88 +336,24 @@ def _nominal_sim(model, s: JointSignals, others: dict):
                          "recorded motor angle", " ".join(str(e).split())[:200]) from None
 
 
-def _refine(cand, model, train) -> tuple:
-    """The candidate refitted by output error: its parameter vector (Candidate.theta) moved by
-    Nelder-Mead to the best output-error fit of `model` with it on `train` = (signals, others'
-    accelerations, band), the nominal parameters held. Returns (candidate, fit before, fit after);
-    the candidate unchanged when it has no vector or the refit does not raise the fit."""
-    if cand.rebuild is None or train is None:
-        return cand, None, None
-    data, others, band = train
-
-    def neg_fit(th):
-        # a trial vector can make the element overflow (a loop far too narrow): scored as the
-        # worst, not warned about
-        try:
-            with np.errstate(over="ignore", invalid="ignore"):
-                m = cand.rebuild(th).apply(model)
-                f = simulate_joint(m, data.t, data.q, data.q_m, data.u, others, band_hz=band).fit
-        except (InputError, RuntimeError, FloatingPointError, ValueError, np.linalg.LinAlgError):
-            return np.inf
-        return -f if np.isfinite(f) else np.inf
-
-    x0 = np.asarray(cand.theta, float)
-    simplex = np.vstack([x0] + [x0 + np.eye(x0.size)[i] * cand.steps[i] for i in range(x0.size)])
-    f0 = neg_fit(x0)
-    res = minimize(neg_fit, x0, method="Nelder-Mead",
-                   options={"initial_simplex": simplex, "maxfev": REFINE_EVALS_PER_PARAMETER * x0.size,
-                            "xatol": 1e-3, "fatol": 0.01})
-    if not np.isfinite(res.fun) or not res.fun < f0:
-        return cand, -f0, -f0
-    return cand.rebuild(res.x), -f0, -float(res.fun)
-
-
-def _augment(jn, cand, fams, qdd, current, held_out, sds: float, banned: set, rejected: list, train=None):
-    """Add a search candidate to joint jn's current model: refitted on the whole trial (and, with
-    `train` = (signals, others' accelerations, band), by output error there: :func:`_refine`),
-    applied, and (`held_out` given) gated by the held-out output-error fit, which it must raise by
-    more than `sds` x the SD of that change the recording's noise gives (and by more than
-    GAIN_MIN_POINTS). Returns (jn, candidate, augmented model, held-out comparison or None, gain
-    points, its SD), or None with the candidate banned and its reason in `rejected`."""
+def _augment(jn, cand, fams, qdd, current, banned: set, rejected: list):
+    """Add a search candidate to joint jn's current model by equation error alone (the search
+    without simulations): refitted on the whole trial and applied. Returns (jn, candidate,
+    augmented model), or None with the candidate banned and its reason in `rejected`."""
     fam = fams[jn]
     full = FITTERS[cand.name](fam, _residual_of(fam, cand.family)[1], {k: v for k, v in qdd.items() if k != jn})
-    if full is not None and train is not None:
-        full = _refine(full, current[jn], train)[0]
-    augmented, reason = None, ""
+    reason = ""
     for c in ((full, cand) if full is not None else (cand,)):
         try:
-            augmented = c.apply(current[jn])
+            return jn, c, c.apply(current[jn])
         except InputError as e:
             # a fit outside the element's physics (a hysteretic share above 1, a negative
             # stiffness): a finding about the model, not a crash; the effect is not tried again
             reason = (f"its fit is not physical ({e.field} = {e.got}, expected {e.expected}): the residual it "
                       "followed is left as found")
-            continue
-        cand = c
-        break
-    if augmented is None:
-        banned.add((jn, cand.name))
-        rejected.append({"name": cand.name, "joint": jn, "parameters": cand.params, "reason": reason})
-        return None
-    if held_out is None:
-        return jn, cand, augmented, None, None, None
-    # named only if it also improves the held-out output-error fit (the validation recording's):
-    # an equation-error gain can be the model compensating its own misfit
-    data, others, where, chain = held_out(jn)
-    fit0 = chain[-1].fit
-    sd = 0.0
-    try:
-        oe1 = simulate_joint(augmented, data.t, data.q, data.q_m, data.u, others, band_hz=chain[0].band_hz)
-        fit1 = oe1.fit
-        if sds > 0:
-            sd = chain[-1].change_sd(oe1)
-        why = (f"it changes the {where}'s output-error fit by {fit1 - fit0:+.2f} points"
-               + (f" (noise SD of the change {sd:.2f}; a weak equation-error signal must raise it by {sds:g} SDs "
-                  f"and {WEAK_MIN_POINTS:g} points)"
-                  if sds > 0 else ": an equation-error gain without a simulated one (the model compensating its own "
-                                  "misfit, or an effect the held-out recording does not excite)"))
-    except (InputError, RuntimeError) as e:     # e.g. a spring with no static equilibrium
-        oe1, fit1, why = None, -np.inf, f"the model with it cannot be simulated ({e})"
-    if not fit1 - fit0 > max(GAIN_MIN_POINTS, sds * sd, WEAK_MIN_POINTS if sds > 0 else 0.0):
-        banned.add((jn, cand.name))
-        rejected.append({"name": cand.name, "joint": jn, "parameters": cand.params, "reason": why})
-        return None
-    return jn, cand, augmented, oe1, fit1 - fit0, sd
+    banned.add((jn, cand.name))
+    rejected.append({"name": cand.name, "joint": jn, "parameters": cand.params, "reason": reason})
+    return None
 
 
 def _prove(model, steps: list, s: JointSignals, others: dict):
@@ -594,9 +523,10 @@ def discover(signals: dict, models: dict, *, fs_hz: float, validation: dict | No
     """Discover what `models` miss in the recording `signals` (joint -> JointSignals).
 
     alpha : significance after the Bonferroni correction over the effects and joints tried.
-    screen : when nothing is significant at alpha, the effects significant at this level are
-        simulated (SCREEN_TRIES of them) and named only if they raise the held-out output-error fit
-        by GAIN_SDS x the noise SD of that change.
+    screen : the effects significant at this level (or refittable by output error) are judged by
+        the simulation on the held-out evidence (:mod:`.tournament`): named when they raise the
+        held-out fit by GAIN_SDS x the noise SD of that change (or, significant at alpha, at all)
+        and by WEAK_MIN_POINTS.
     min_explained : an effect must explain, on the held-out part, a torque RMS of at least this
         fraction of the joint's motor-torque RMS (0.3 %: 0.1 N m on a joint whose torque varies by
         35 N m RMS; below that no engineer would change a model, and what the search finds is the
@@ -635,22 +565,11 @@ def discover(signals: dict, models: dict, *, fs_hz: float, validation: dict | No
             held[jn] = (data, others, "validation recording" if on_valid else "trial", [oe])
         return held[jn]
 
-    trains = {}
-
-    def train_of(jn):
-        """(signals, others' accelerations, band) an effect is refitted on by output error: the
-        trial, or its first part when the trial's rest is the held-out evidence."""
-        if jn not in trains:
-            s = signals[jn]
-            others = {k: v for k, v in qdd.items() if k != jn}
-            if validation is None or jn not in validation:
-                from .reident import segment
-                s = segment(s, 0.0, 1.0 - holdout)
-                m = (signals[jn].t >= s.t[0]) & (signals[jn].t <= s.t[-1])
-                others = {k: v[m] for k, v in others.items()}
-            trains[jn] = (s, others, _nominal_sim(current[jn], s, others).band_hz)
-        return trains[jn]
-
+    judge = None
+    if simulate:
+        bands = {jn: _nominal_sim(nominal[jn], signals[jn], {k: v for k, v in qdd.items() if k != jn}).band_hz
+                 for jn in names}
+        judge = Judge(signals, validation, qdd, vq or {}, nominal, holdout, bands, GAIN_SDS, WEAK_MIN_POINTS, alpha)
     stop = f"{max_effects} effects found (the most searched for)"
     for _ in range(max_effects + len(effects)):
         if len(found) >= max_effects:
@@ -666,46 +585,54 @@ def discover(signals: dict, models: dict, *, fs_hz: float, validation: dict | No
             break
         n_tests = len(results)
         floor = {jn: min_explained * float(np.std(fams[jn].u[fams[jn].keep_s])) for jn in names}
-        big = [(jn, c, s) for jn, c, s in results if s["explained_Nm"] >= floor[jn]]
-        sig = [x for x in big if x[2]["p_value"] * n_tests < alpha]
-        # the clear ones (alpha) need only a held-out output-error gain; the ones the equation
-        # error sees weakly (screen) must raise it by GAIN_SDS x the SD the noise gives that change
-        # (an effect of a fraction of the mocap noise per sample drowns in a residual that
-        # differentiates it, and shows only in the simulation)
-        # and when neither finds one, the effects output error can refit are refitted by it on the
-        # trial (an effect a fraction of the mocap noise per sample, or one the equation error
-        # misreads, is fitted where the noise averages out) and gated like the screened ones
-        screened = sorted((x for x in big if x[2]["p_value"] * n_tests < screen), key=lambda x: x[2]["criterion"])
-        refit = sorted((x for x in big if x[1].rebuild is not None and x not in screened[:SCREEN_TRIES]),
-                       key=lambda x: x[2]["criterion"]) if simulate else []
-        tries = ([(x, 0.0, False) for x in sorted(sig, key=lambda x: x[2]["criterion"])[:1]] if sig else
-                 [(x, GAIN_SDS, True) for x in screened[:SCREEN_TRIES]] + [(x, GAIN_SDS, True) for x in refit[:REFINE_TRIES]])
-        if not tries:
-            stop = "no further effect is significant"
-            break
-        # every weak one is tried, and the held-out evidence picks the one that explains most (a
-        # clock delay can follow part of a hysteresis loop's phase; tried first and named, it
-        # would leave the loop too little to clear the bar)
-        passed = []
-        for (jn, cand, score), sds, by_oe in tries:
-            a = _augment(jn, cand, fams, qdd, current, held_out if simulate else None, sds, banned, rejected,
-                         train=train_of(jn) if by_oe else None)
-            if a is not None:
-                passed.append((a, score))
-                if not by_oe:
-                    break
-        added = max(passed, key=lambda x: -np.inf if x[0][4] is None else x[0][4]) if passed else None
-        if added is not None:
-            added, score = added
+        if simulate:
+            # the leading candidates refitted by output error and judged against each other on the
+            # held-out evidence (module .tournament): the equation error's ranking alone reads a
+            # stiffening spring at 0.5 x the mocap noise as free play, and a clock delay as a loop
+            cands = pool(results, n_tests, floor, screen)
+            if not cands:
+                stop = "no further effect is significant"
+                break
+            judged = [judge.judge(jn, c, sc, current[jn], n_tests) for jn, c, sc in cands]
+            for j in judged:
+                if not j.admissible:
+                    banned.add((j.joint, j.candidate.name))
+                    rejected.append({"name": j.candidate.name, "joint": j.joint, "parameters": j.candidate.params,
+                                     "reason": j.reason})
+            win, ties = judge.choose(judged)
+            if win is None:
+                stop = "no further effect is significant"
+                break
+            jn = win.joint
+            cand, augmented = judge.finalize(win, fams, qdd, current)
+            if validation is not None and jn in validation:
+                data, others, where, chain = held_out(jn)
+                chain.append(simulate_joint(augmented, data.t, data.q, data.q_m, data.u, others,
+                                            band_hz=chain[0].band_hz))
+            z = win.z
+            p_oe = min(1.0, float(stats.norm.sf(z)) * len(cands)) if np.isfinite(z) else 0.0
+            score = {**win.score, **score_dict(win), "indistinguishable_from": ties,
+                     "candidates": [{"name": j.candidate.name, "joint": j.joint, "held_out_gain_points": j.gain,
+                                     "held_out_gain_sd_points": j.sd, "admissible": j.admissible} for j in judged]}
+            current[jn] = augmented
+            found.append({"name": cand.name, "joint": jn, "candidate": cand, "score": score, "model": augmented,
+                          "p_value": min(1.0, 2.0 * min(win.score["p_value"] * n_tests, p_oe)),
+                          "runner_up": sorted(((j.candidate.name, j.gain) for j in judged if j is not win),
+                                              key=lambda x: -x[1])[:3]})
+            fams, qdd = _families_all(current, signals, fs_hz)
+            continue
+        # the search alone (simulate=False): the clearest significant effect, by equation error
+        sig = sorted((x for x in results if x[2]["explained_Nm"] >= floor[x[0]] and x[2]["p_value"] * n_tests < alpha),
+                     key=lambda x: x[2]["criterion"])
+        added = None
+        for jn, cand, score in sig:
+            added = _augment(jn, cand, fams, qdd, current, banned, rejected)
+            if added is not None:
+                break
         if added is None:
-            if sig:
-                continue
             stop = "no further effect is significant"
             break
-        jn, cand, augmented, oe1, gain, gain_sd = added
-        if oe1 is not None:
-            held_out(jn)[3].append(oe1)
-            score = {**score, "held_out_gain_points": gain, "held_out_gain_sd_points": gain_sd or None}
+        jn, cand, augmented = added[:3]
         current[jn] = augmented
         found.append({"name": cand.name, "joint": jn, "candidate": cand, "score": score, "model": augmented,
                       "p_value": min(1.0, score["p_value"] * n_tests),
@@ -769,7 +696,8 @@ def discover(signals: dict, models: dict, *, fs_hz: float, validation: dict | No
         effects_out.append({"name": c.name, "joint": f["joint"], "explanation": c.explain(f["score"]),
                             "location": {**c.location, "residual": c.family,
                                          "explained_torque_rms_Nm": f["score"]["explained_Nm"],
-                                         **{k: f["score"][k] for k in ("held_out_gain_points", "held_out_gain_sd_points")
+                                         **{k: f["score"][k] for k in ("held_out_gain_points", "held_out_gain_sd_points",
+                                                                       "held_out", "candidates", "indistinguishable_from")
                                             if k in f["score"]}},
                             "parameters": c.params, "p_value": f["p_value"],
                             "fit_gain_pct": f.get("fit_gain_pct"), "runner_up": f["runner_up"],

@@ -240,6 +240,45 @@ def _period_s(q_m, fs):
     return excitation_period_s(q_m, fs)
 
 
+def coupling_input(model: JointModel, others_qdd: dict | None) -> np.ndarray | None:
+    """The external torque (T,) N m the model's coupling terms put on its link from the other
+    joints' accelerations, -sum inertia x q_other''; None without coupling."""
+    if not model.coupling:
+        return None
+    others_qdd = others_qdd or {}
+    missing = [s for s in model.coupling if s not in others_qdd]
+    if missing:
+        raise InputError(None, f"joints[{model.name}].coupling", "source joints in the recording", missing)
+    return -sum(c * np.asarray(others_qdd[s]) for s, c in model.coupling.items())
+
+
+def predict(model: JointModel, t, q, q_m, ext=None, *, rtol: float = 1e-4, atol: float = 1e-7):
+    """(q_sim, u_sim) (T,): the link angle on the mocap clock (the model's delay applied) and the
+    motor torque the model predicts when its link is driven by the recorded motor angle, Wiener-
+    filtered (:func:`mocapfj.ident.output_error.wiener_drive`). ext : (T,) N m, the coupling torque
+    (:func:`coupling_input`) or None. A compiled kernel when the model is one it runs, else
+    :func:`mocapfj.dynamics.simulate` on a budget of 20 derivative evaluations per sample (raises
+    RuntimeError beyond it)."""
+    fs = 1.0 / float(np.median(np.diff(t)))
+    # the motor angle drives the link without the encoder noise that would ring it where the real
+    # link, driven by the true motion, does not (mocapfj.ident.output_error.wiener_drive)
+    drive = _wiener_drive(q_m, fs)
+    fast = _plain_link(model, t, drive, 2.0 * float(np.nanmax(np.abs(q_m - q)))) if ext is None else None
+    if fast is not None:
+        q_sim, u_sim = fast
+    else:
+        def coupling_torque(tt):
+            return np.interp(tt, t, ext) if np.ndim(tt) == 0 else np.interp(tt, t, ext)[:, None]
+
+        res = simulate(model.single_joint(), t, PrescribedMotor.from_samples(t, drive),
+                       tau_ext=coupling_torque if ext is not None else None, rtol=rtol, atol=atol,
+                       max_evals=20 * t.size)
+        q_sim, u_sim = res.q[:, 0], res.u[:, 0]
+    if model.delay_s:
+        q_sim = shift_signal(t, q_sim, -model.delay_s)        # mocap stamps are late: it saw q(t + delay)
+    return q_sim, u_sim
+
+
 def simulate_joint(model: JointModel, t, q, q_m, u, others_qdd: dict | None = None, *, trim_s: float = 1.0,
                    rtol: float = 1e-4, atol: float = 1e-7, period_s: float | None | str = "auto",
                    band_hz: float | None = None) -> OutputError:
@@ -257,30 +296,8 @@ def simulate_joint(model: JointModel, t, q, q_m, u, others_qdd: dict | None = No
 
     t, q, q_m, u = (np.asarray(a, dtype=np.float64) for a in (t, q, q_m, u))
     fs = 1.0 / float(np.median(np.diff(t)))
-    ext = None
-    if model.coupling:
-        others_qdd = others_qdd or {}
-        missing = [s for s in model.coupling if s not in others_qdd]
-        if missing:
-            raise InputError(None, f"joints[{model.name}].coupling", "source joints in the recording", missing)
-        ext = -sum(c * np.asarray(others_qdd[s]) for s, c in model.coupling.items())
-
-    def coupling_torque(tt):
-        return np.interp(tt, t, ext) if np.ndim(tt) == 0 else np.interp(tt, t, ext)[:, None]
-
-    # the motor angle drives the link without the encoder noise that would ring it where the real
-    # link, driven by the true motion, does not (mocapfj.ident.output_error.wiener_drive)
-    drive = _wiener_drive(q_m, fs)
-    fast = _plain_link(model, t, drive, 2.0 * float(np.nanmax(np.abs(q_m - q)))) if ext is None else None
-    if fast is not None:
-        q_sim, u_sim = fast
-    else:
-        res = simulate(model.single_joint(), t, PrescribedMotor.from_samples(t, drive),
-                       tau_ext=coupling_torque if ext is not None else None, rtol=rtol, atol=atol,
-                       max_evals=20 * t.size)
-        q_sim, u_sim = res.q[:, 0], res.u[:, 0]
-    if model.delay_s:
-        q_sim = shift_signal(t, q_sim, -model.delay_s)        # mocap stamps are late: it saw q(t + delay)
+    ext = coupling_input(model, others_qdd)
+    q_sim, u_sim = predict(model, t, q, q_m, ext, rtol=rtol, atol=atol)
     d_rec, d_sim = q_m - q, q_m - q_sim
     keep = (t >= t[0] + trim_s) & (t <= t[-1] - trim_s) & np.isfinite(d_sim)
     r_d = np.full_like(t, np.nan)

@@ -129,7 +129,7 @@ def test_an_equation_error_gain_the_simulation_does_not_confirm_is_rejected(pa10
     assert d.effects == [] and "mismatch" in d.verdict
     (r,) = d.rejected
     assert r["name"] == "drive_gain"
-    assert ("trial's output-error fit by -" in r["reason"]) if how == "worse" else ("not physical" in r["reason"])
+    assert ("held-out part's fit changes by -" in r["reason"]) if how == "worse" else ("not physical" in r["reason"])
 
 
 def test_a_biased_nominal_neither_fakes_an_effect_nor_stays_biased(pa10_control, monkeypatch):
@@ -218,34 +218,3 @@ def test_grid_subset_an_effect_at_the_noise_is_named_and_recovers_the_gap(effect
     band = d.validation["fits"]["j1"]["before"]["band_hz"]
     vt = simulate_joint(true, sv.t, sv.q, sv.q_m, sv.u, band_hz=band).fit
     assert vt - vb > 0.2 and va - vb >= 0.5 * (vt - vb), (vb, va, vt)
-
-
-def test_an_effect_refitted_by_output_error_moves_to_the_truth():
-    """Free play of 1.5 x the deflection noise (total width) on a PA-10 hinge case: the
-    equation-error candidate restarted from three times the planted width, refitted by output
-    error on the trial with the nominal parameters held (engine._refine), comes back to within 30 %
-    of the planted width, and its trial fit rises to within 0.3 points of the true model's."""
-    from dataclasses import replace
-
-    from mocapfj.discover import engine
-    from mocapfj.discover.effects import FITTERS
-    from mocapfj.dynamics import Backlash
-
-    case = small_grid(6)[0]
-    _, truth = simulate_hinge(case)
-    planted = replace(case, backlash_rad=1.5 * truth["noise"]["deflection_noise_sd_rad"])
-    s = mocapfj.signals(simulate_hinge(planted)[0])
-    sj = s["j1"]
-    nominal = JointModel(name="j1", gear_ratio=case.gear_ratio, I=case.I, J=case.J, mglx=case.mglx, mgly=case.mgly,
-                         b=case.b, friction=CoulombViscous(c=case.c, v=case.v, smoothing=case.eps_rad_s),
-                         spring=LinearSpring(k=case.k))
-    fams, _ = engine._families_all({"j1": nominal}, s, sj.fs_hz)
-    cand = FITTERS["backlash"](fams["j1"], fams["j1"].keep_s, {})
-    start = cand.rebuild(cand.theta + np.array([np.log(3.0 * planted.backlash_rad / cand.params["gap_rad"]), 0.0]))
-    band = simulate_joint(nominal, sj.t, sj.q, sj.q_m, sj.u).band_hz
-    refined, f0, f1 = engine._refine(start, nominal, (sj, {}, band))
-    gap = refined.params["gap_rad"]
-    true_fit = simulate_joint(nominal.with_(spring=Backlash(planted.backlash_rad, nominal.spring)), sj.t, sj.q, sj.q_m,
-                              sj.u, band_hz=band).fit
-    assert abs(gap / planted.backlash_rad - 1.0) < 0.3, (gap, planted.backlash_rad)
-    assert f1 > f0 and f1 > true_fit - 0.3, (f0, f1, true_fit)

@@ -1,0 +1,230 @@
+"""Which effect to add: the candidates of one search step refitted by output error and judged on
+held-out evidence against each other (docs/discovery.md, "Name").
+
+The equation-error search (:mod:`.engine`) ranks the effects by a held-out criterion on a residual
+that differentiates the mocap noise: an effect of a fraction of that noise per sample can rank
+below one that follows the same residual with another shape (a free play and a stiffening spring
+both soften the joint at small deflections). So the step's leading candidates are all refitted by
+output error on the trial's first part (:func:`.refit.refit`, the current model's parameters
+held) and simulated on the held-out evidence: the trial's last part and the validation recording
+when there is one. Each gets its gain there (fit points over the current model, summed over the
+held-out recordings) and the SD of that gain the recordings' noise alone gives. An effect is
+admissible when its gain exceeds GAIN_SDS of those SDs and WEAK_MIN_POINTS, and no held-out
+recording loses more than LOSS_SDS of its SD with it; the admissible one with the largest gain is
+added, refitted on the whole trial.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+from ..errors import InputError
+from .effects import FITTERS, Candidate
+from .evidence import Evidence
+from .refit import refit
+from .reident import segment
+
+__all__ = ["Judged", "Judge", "pool", "score_dict", "POOL_SIZE", "LOSS_SDS", "TIE_SDS"]
+
+POOL_SIZE = 5
+"""Candidates judged by output error per search step (the equation error's lowest criteria)."""
+LOSS_SDS = 2.0
+"""A held-out recording may not lose more than this many noise SDs with the effect."""
+TIE_SDS = 2.0
+"""Two candidates tie when the leader's held-out fit exceeds the other's by no more than this many
+noise SDs of their difference."""
+
+
+@dataclass(eq=False)
+class Judged:
+    """A candidate judged on the held-out evidence: `gains` {evidence name: (gain points, SD)},
+    `gain` (their sum) and `sd` (its SD), `admissible`, and why not (`reason`)."""
+
+    joint: str
+    candidate: Candidate
+    score: dict
+    model: object
+    gains: dict = field(default_factory=dict)
+    scores: dict = field(default_factory=dict, repr=False)
+    gain: float = math.nan
+    sd: float = math.nan
+    admissible: bool = False
+    reason: str = ""
+
+    @property
+    def z(self) -> float:
+        return self.gain / self.sd if self.sd > 0 else (math.inf if self.gain > 0 else 0.0)
+
+
+class Judge:
+    """The held-out evidence of every joint, prepared once, and the current model's scores on it.
+
+    signals : {joint: JointSignals} (the trial); validation : {joint: JointSignals} or None;
+    qdd, vqdd : {joint: (T,) rad/s^2} the joints' accelerations on the trial and the validation
+    recording (coupling terms); nominal : {joint: JointModel}; holdout : the trial's held-out
+    share (its last part); bands : {joint: Hz} the comparison band (the nominal model's on the
+    trial)."""
+
+    def __init__(self, signals, validation, qdd, vqdd, nominal, holdout: float, bands: dict,
+                 gain_sds: float, min_points: float, alpha: float):
+        self.signals, self.validation, self.qdd, self.vqdd = signals, validation, qdd, vqdd
+        self.nominal, self.holdout, self.bands = nominal, holdout, bands
+        self.gain_sds, self.min_points, self.alpha = gain_sds, min_points, alpha
+        self._ev = {}
+        self._base = {}
+
+    def _others(self, jn, sig, full, acc):
+        m = (full.t >= sig.t[0]) & (full.t <= sig.t[-1])
+        return {k: v[m] for k, v in acc.items() if k != jn}
+
+    def evidence(self, jn: str, part: str) -> Evidence | None:
+        """The evidence `part` ("head", "tail", "trial" or "validation") of joint jn."""
+        key = (jn, part)
+        if key not in self._ev:
+            s = self.signals[jn]
+            ev = None
+            if part == "validation":
+                if self.validation is not None and jn in self.validation:
+                    v = self.validation[jn]
+                    ev = Evidence(v, {k: x for k, x in self.vqdd.items() if k != jn}, self.bands[jn],
+                                  model=self.nominal[jn], name="validation recording")
+            else:
+                lo, hi = {"head": (0.0, 1.0 - self.holdout), "tail": (1.0 - self.holdout, 1.0),
+                          "trial": (0.0, 1.0)}[part]
+                seg = s if part == "trial" else segment(s, lo, hi)
+                ev = Evidence(seg, self._others(jn, seg, s, self.qdd), self.bands[jn], model=self.nominal[jn],
+                              name={"head": "trial's first part", "tail": "trial's held-out part",
+                                    "trial": "trial"}[part])
+            self._ev[key] = ev
+        return self._ev[key]
+
+    def held_out(self, jn: str) -> list[Evidence]:
+        return [ev for ev in (self.evidence(jn, "tail"), self.evidence(jn, "validation")) if ev is not None]
+
+    def base(self, jn: str, model) -> dict:
+        """The current model's scores on joint jn's held-out evidence (kept per model)."""
+        key = (jn, id(model))
+        if key not in self._base:
+            self._base = {k: v for k, v in self._base.items() if k[0] != jn}
+            self._base[key] = {ev.name: ev.score(model) for ev in self.held_out(jn)}
+        return self._base[key]
+
+    def judge(self, jn: str, cand: Candidate, score: dict, current, n_tests: int) -> Judged:
+        """Refit `cand` by output error on the trial's first part and score it on the held-out
+        evidence against `current` (module docstring)."""
+        head = self.evidence(jn, "head")
+        c = cand
+        if cand.rebuild is not None:
+            c = refit(cand, current, head)[0]
+        try:
+            model = c.apply(current)
+        except InputError as e:
+            return Judged(jn, c, score, None, reason=f"its fit is not physical ({e.field} = {e.got}, expected "
+                                                        f"{e.expected}): the residual it followed is left as found")
+        base = self.base(jn, current)
+        j = Judged(jn, c, score, model)
+        gain, var = 0.0, 0.0
+        worst = []
+        for ev in self.held_out(jn):
+            b = base[ev.name]
+            a = ev.score(model)
+            if not math.isfinite(a.fit):
+                j.reason = f"the model with it cannot be simulated on the {ev.name}"
+                return j
+            g = a.fit - b.fit
+            sd = ev.change_sd(b, a)
+            sd = sd if math.isfinite(sd) else 0.0
+            j.gains[ev.name] = (g, sd)
+            j.scores[ev.name] = a
+            gain += g
+            var += sd ** 2
+            if g < -LOSS_SDS * sd:
+                worst.append(f"the {ev.name}'s fit changes by {g:+.2f} points (noise SD {sd:.2f})")
+        j.gain, j.sd = gain, math.sqrt(var)
+        parts = "; ".join(f"{n}: {g:+.2f} (SD {s:.2f})" for n, (g, s) in j.gains.items())
+        if worst:
+            j.reason = "it lowers the held-out fit: " + "; ".join(worst)
+        elif not gain > self.min_points:
+            j.reason = f"its held-out gain {gain:+.2f} points ({parts}) is below {self.min_points:g} points"
+        elif gain > self.gain_sds * j.sd or score["p_value"] * n_tests < self.alpha:
+            # a gain beyond the noise, or one that confirms a clear equation-error signature (a spring
+            # effect the held-out simulation sees at 1-2 noise SDs can be 1e-19 in the spring
+            # residual, which does not carry the link's dynamics)
+            j.admissible = True
+        else:
+            j.reason = (f"its held-out gain {gain:+.2f} points ({parts}) is below {self.gain_sds:g} noise SDs "
+                        f"({j.sd:.2f}) and its equation-error signal is weak (p = {score['p_value'] * n_tests:.2g})")
+        return j
+
+    def paired(self, a: Judged, b: Judged) -> tuple[float, float]:
+        """(a's held-out fit minus b's, summed over the held-out recordings; the SD of that
+        difference the noise gives, from the change between the two models' predictions)."""
+        d, var = 0.0, 0.0
+        for ev in self.held_out(a.joint):
+            sa, sb = a.scores[ev.name], b.scores[ev.name]
+            d += sa.fit - sb.fit
+            sd = ev.change_sd(sb, sa)
+            var += sd ** 2 if math.isfinite(sd) else 0.0
+        return d, math.sqrt(var)
+
+    def choose(self, judged: list) -> tuple[Judged | None, list]:
+        """The admissible candidate to add and the ones it cannot be told from: the largest held-out
+        gain leads; another candidate of the same joint whose gain is within TIE_SDS noise SDs of
+        the difference between their predictions ties with it, and among the tied the clearest
+        equation-error signature (the lowest held-out criterion) is chosen, the physics-specific
+        test where the simulated fits cannot tell them apart."""
+        ok = [j for j in judged if j.admissible]
+        if not ok:
+            return None, []
+        lead = max(ok, key=lambda j: j.gain)
+        tied = []
+        for j in ok:
+            if j is lead or j.joint != lead.joint:
+                continue
+            d, sd = self.paired(lead, j)
+            if d <= TIE_SDS * sd:
+                tied.append((j, d, sd))
+        pick = min([lead] + [t[0] for t in tied], key=lambda j: j.score["criterion"])
+        others = [{"name": j.candidate.name, "held_out_gain_points": j.gain,
+                   "difference_points": (d if pick is lead else None), "difference_sd_points": sd}
+                  for j, d, sd in tied if j is not pick]
+        if pick is not lead:
+            d, sd = self.paired(lead, pick)
+            others.append({"name": lead.candidate.name, "held_out_gain_points": lead.gain,
+                           "difference_points": d, "difference_sd_points": sd})
+        return pick, others
+
+    def finalize(self, j: Judged, fams, qdd, current):
+        """The chosen candidate fitted on the whole trial (equation error for an effect output error
+        does not refit, then output error for one it does, from the first part's fit): (candidate,
+        augmented model); the first part's fit when the whole trial's is not physical."""
+        jn, c = j.joint, j.candidate
+        if c.rebuild is not None:
+            c2 = refit(c, current[jn], self.evidence(jn, "trial"))[0]
+        else:
+            from .engine import _residual_of
+            fam = fams[jn]
+            c2 = FITTERS[c.name](fam, _residual_of(fam, c.family)[1], {k: v for k, v in qdd.items() if k != jn})
+        for cc in ((c2, c) if c2 is not None else (c,)):
+            try:
+                return cc, cc.apply(current[jn])
+            except InputError:
+                continue
+        return c, j.model
+
+
+def pool(results: list, n_tests: int, floor: dict, screen: float) -> list:
+    """The step's candidates for the output-error judgement: those that explain at least `floor`
+    and are significant at `screen` (Bonferroni over `n_tests`) or refittable by output error, by
+    the equation error's held-out criterion, POOL_SIZE at most."""
+    big = [(jn, c, s) for jn, c, s in results if s["explained_Nm"] >= floor[jn]]
+    keep = [x for x in big if x[2]["p_value"] * n_tests < screen or x[1].rebuild is not None]
+    return sorted(keep, key=lambda x: x[2]["criterion"])[:POOL_SIZE]
+
+
+def score_dict(j: Judged) -> dict:
+    """What the effect's location reports of its judgement."""
+    return {"held_out_gain_points": j.gain, "held_out_gain_sd_points": j.sd,
+            "held_out": {n: {"gain_points": g, "sd_points": s} for n, (g, s) in j.gains.items()}}
+
