@@ -20,7 +20,6 @@ IDENTIFY_METHODS = ("motor_first", "two_step")   # mocapfj.ident.IDENTIFY_METHOD
 
 # Commands of the design that later versions fill in: (name, one-line help).
 PLANNED = [
-    ("calibrate-camera", "calibrate camera intrinsics from board views"),
     ("calibrate-rig", "calibrate a multi-camera rig (board or wand)"),
     ("triangulate", "2D detections to labelled 3D marker trajectories"),
     ("frf", "multisine frequency response estimation"),
@@ -39,10 +38,10 @@ def _work(args):
 def _inputs(args) -> list:
     """The paths a command reads (that --out must keep clear of)."""
     out = []
-    for name in ("scenario", "recording", "model", "validation"):
+    for name in ("scenario", "recording", "model", "validation", "board"):
         if getattr(args, name, None):
             out.append(getattr(args, name))
-    return out + list(getattr(args, "recordings", None) or [])
+    return out + list(getattr(args, "recordings", None) or []) + list(getattr(args, "images", None) or [])
 
 
 def _emit(args, summary: dict, human: Callable[[dict], str]) -> None:
@@ -247,6 +246,28 @@ def _cmd_discover(args) -> int:
     return 0
 
 
+def _cmd_calibrate_camera(args) -> int:
+    from .pipeline.calibrate import run_calibrate_camera
+
+    s = run_calibrate_camera(args.images, args.board, _work(args), model=args.model, name=args.name,
+                             every=args.every, progress=not args.json)
+
+    def human(s):
+        sd = s["std"]
+        lines = [f"camera {s['camera']} ({s['image_size'][0]} x {s['image_size'][1]} px, {s['model']} distortion): "
+                 f"{s['n_views_used']} of {s['n_views']} views used, {s['n_points']} features, RMS {s['rms_px']:.3f} px",
+                 f"  fx {s['fx']:.2f} +- {sd['fx']:.2f}  fy {s['fy']:.2f} +- {sd['fy']:.2f}  cx {s['cx']:.2f} +- "
+                 f"{sd['cx']:.2f}  cy {s['cy']:.2f} +- {sd['cy']:.2f} px",
+                 "  dist " + ", ".join(f"{n} {v:+.5f} +- {sd[n]:.1e}" for n, v in zip(s["dist_names"], s["dist"])),
+                 f"  image coverage {s['coverage_pct']:.0f} % of cells"]
+        lines += [f"  warning: {w}" for w in s["warnings"]]
+        lines.append(f"  wrote {args.out} ({', '.join(s['files'].values())})")
+        return "\n".join(lines)
+
+    _emit(args, s, human)
+    return 0
+
+
 def _cmd_inspect(args) -> int:
     from .pipeline import inspect_path
 
@@ -330,6 +351,19 @@ def build_parser() -> argparse.ArgumentParser:
     dc.add_argument("--json", action="store_true", help="print a JSON summary on stdout")
     _allow_outside_bundle(dc)
     dc.set_defaults(func=_cmd_discover)
+
+    cc = sub.add_parser("calibrate-camera", help="calibrate camera intrinsics from board views")
+    cc.add_argument("images", nargs="+", metavar="IMAGES",
+                    help="images or videos of the board (a directory stands for the images and videos in it)")
+    cc.add_argument("--board", required=True, help="calibration target TOML (calibration/boards/*.toml)")
+    cc.add_argument("--out", required=True, help="output directory")
+    cc.add_argument("--model", default="standard", choices=["standard", "no_k3", "rational"],
+                    help="distortion coefficients: standard (k1 k2 p1 p2 k3, default), no_k3 (k1 k2 p1 p2), "
+                         "rational (k1..k6 p1 p2)")
+    cc.add_argument("--name", default="cam_0", help="camera name in the rig file (default cam_0)")
+    cc.add_argument("--every", type=int, default=1, help="use every N-th video frame (default 1)")
+    cc.add_argument("--json", action="store_true", help="print a JSON summary on stdout")
+    cc.set_defaults(func=_cmd_calibrate_camera)
 
     i = sub.add_parser("inspect", help="check and summarise a recording bundle or a C3D/TRC file")
     i.add_argument("recording", help="bundle directory, recording.toml, or marker file")

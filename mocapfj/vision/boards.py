@@ -44,10 +44,11 @@ from scipy.spatial import cKDTree
 
 from ..errors import InputError
 from ..types import BOARD_TYPES, Board
-from .corners import grow_lattice, lattice_spacing, predict_nodes, refine_saddles, refine_square_corners, saddle_points
+from .corners import (grow_lattice, lattice_size, lattice_spacing, predict_nodes, refine_saddles, refine_square_corners,
+                      saddle_points, xjunction_test)
 
 __all__ = ["BoardDetection", "APRILTAG_DICTIONARIES", "aruco_dictionary", "charuco_board", "board_points",
-           "board_symmetry", "grey_image", "detect_board"]
+           "board_symmetry", "grey_image", "detect_board", "chessboard_size"]
 
 APRILTAG_DICTIONARIES = {"tag36h11": "DICT_APRILTAG_36h11", "tag25h9": "DICT_APRILTAG_25h9",
                          "tag16h5": "DICT_APRILTAG_16h5", "tag36h10": "DICT_APRILTAG_36h10"}
@@ -229,6 +230,12 @@ def detect_board(image, board: Board) -> BoardDetection | None:
     return BoardDetection(ids=ids[order], xy_px=xy[order], image_size=size, method=method)
 
 
+def chessboard_size(image) -> tuple[int, int] | None:
+    """Inner corners (longer side first) of the largest chessboard-like lattice in `image`, or
+    None: for saying what a board file should hold when a chessboard is not found."""
+    return lattice_size(grey_image(image))
+
+
 # --- chessboard ---------------------------------------------------------------------------------
 
 def _classic(grey: np.ndarray, cols: int, rows: int) -> np.ndarray | None:
@@ -313,9 +320,35 @@ def _finish_chessboard(grey: np.ndarray, grid: np.ndarray, board: Board) -> np.n
     xy[~ok] = grid.reshape(-1, 2)[~ok]
     grid = _orient_chessboard(grey, xy.reshape(grid.shape), board)
     j, i = np.mgrid[0:board.rows, 0:board.columns]
-    if _inconsistent(np.stack([i.ravel(), j.ravel()], 1).astype(np.float64), grid.reshape(-1, 2)).any():
+    ij = np.stack([i.ravel(), j.ravel()], 1).astype(np.float64)
+    if _inconsistent(ij, grid.reshape(-1, 2)).any() or _continues(grey, ij, grid.reshape(-1, 2), board):
         return None
     return grid.reshape(-1, 2)
+
+
+def _continues(grey: np.ndarray, ij: np.ndarray, xy: np.ndarray, board: Board) -> bool:
+    """True when the lattice goes on past a side of the board: more X-junctions one step beyond
+    it (the printed board has more corners than `board` says; which ones were found is then unknown)."""
+    c, r = board.columns, board.rows
+    sides = [[(-1, j) for j in range(r)], [(c, j) for j in range(r)], [(i, -1) for i in range(c)], [(i, r) for i in range(c)]]
+    ring = np.array([n for side in sides for n in side], dtype=np.float64)
+    q, ok = predict_nodes(ring, ij, xy)
+    h, w = grey.shape
+    inside = ok & (q[:, 0, 0] > 3) & (q[:, 0, 1] > 3) & (q[:, 0, 0] < w - 4) & (q[:, 0, 1] < h - 4)
+    if not inside.any():
+        return False
+    spacing = np.minimum(np.linalg.norm(q[:, 1] - q[:, 0], axis=1), np.linalg.norm(q[:, 2] - q[:, 0], axis=1))
+    radius = np.clip(0.2 * np.nan_to_num(spacing, nan=15.0), 3.0, 8.0)
+    found = np.zeros(len(ring), bool)
+    pr, conv = refine_saddles(grey, q[inside, 0], radius[inside])
+    light = cv2.GaussianBlur(grey.astype(np.float32), (0, 0), 0.7)
+    found[np.nonzero(inside)[0]] = conv & xjunction_test(light, pr, 3.0)[0]
+    start = 0
+    for side in sides:
+        if found[start:start + len(side)].sum() >= max(2, 0.5 * len(side)):
+            return True
+        start += len(side)
+    return False
 
 
 # --- ChArUco ------------------------------------------------------------------------------------

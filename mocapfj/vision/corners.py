@@ -32,7 +32,7 @@ import cv2
 import numpy as np
 from scipy.spatial import cKDTree
 
-__all__ = ["saddle_points", "xjunction_test", "refine_saddles", "grow_lattice", "lattice_spacing", "predict_nodes",
+__all__ = ["saddle_points", "xjunction_test", "refine_saddles", "grow_lattice", "lattice_spacing", "lattice_size", "predict_nodes",
            "refine_square_corners"]
 
 _N_CIRCLE = 32
@@ -309,7 +309,8 @@ def predict_nodes(nodes, known_ij, known_xy, reach: int = 2) -> tuple[np.ndarray
     q : (F, 3, 2) float
         Predicted pixels of node, node + (1, 0) and node + (0, 1).
     ok : (F,) bool
-        At least 4 known nodes around it, not all on one lattice line.
+        At least 4 known nodes around it that determine a homography (not three of four, or
+        all, on one lattice line).
     """
     nodes = np.asarray(nodes, dtype=np.float64).reshape(-1, 2)
     kij = np.asarray(known_ij, dtype=np.float64).reshape(-1, 2)
@@ -324,10 +325,6 @@ def predict_nodes(nodes, known_ij, known_xy, reach: int = 2) -> tuple[np.ndarray
     n = w.sum(axis=1)
     ok = n >= 4
     nn = np.maximum(n, 1.0)
-    mu = (w[..., None] * d).sum(axis=1) / nn[:, None]
-    du = d - mu[:, None]
-    c = np.einsum("fk,fki,fkj->fij", w, du, du) / nn[:, None, None]
-    ok &= np.linalg.eigvalsh(c)[:, 0] > 0.05                                 # not all on one line
     mx = (w[..., None] * kxy[None]).sum(axis=1) / nn[:, None]
     dist = np.linalg.norm(kxy[None] - mx[:, None], axis=2)
     sc = np.sqrt(2.0) / np.maximum((w * dist).sum(axis=1) / nn, 1e-12)
@@ -338,8 +335,12 @@ def predict_nodes(nodes, known_ij, known_xy, reach: int = 2) -> tuple[np.ndarray
     r2 = np.stack([zero, zero, zero, u, v, one, -u * x[..., 1], -v * x[..., 1]], axis=-1)
     ata = np.einsum("fk,fki,fkj->fij", w, r1, r1) + np.einsum("fk,fki,fkj->fij", w, r2, r2)
     atb = np.einsum("fk,fki->fi", w * x[..., 0], r1) + np.einsum("fk,fki->fi", w * x[..., 1], r2)
+    # general position: no lattice row, column or diagonal holds all but one of the points
+    for line in (d[..., 0], d[..., 1], d[..., 0] - d[..., 1], d[..., 0] + d[..., 1]):
+        key = np.rint(line).astype(np.int64) + 2 * reach
+        onehot = key[..., None] == np.arange(4 * reach + 1)
+        ok &= (w[..., None] * onehot).sum(axis=1).max(axis=1) <= n - 2
     ata[~ok] = np.eye(8)
-    ata += np.eye(8)[None] * (1e-12 * np.trace(ata, axis1=1, axis2=2))[:, None, None]
     h = np.linalg.solve(ata, atb[..., None])[..., 0]                          # (F, 8)
     for col, (a, b) in enumerate(((0.0, 0.0), (1.0, 0.0), (0.0, 1.0))):
         den = h[:, 6] * a + h[:, 7] * b + 1.0
@@ -473,6 +474,41 @@ def grow_lattice(grey: np.ndarray, cols: int, rows: int, *, max_seeds: int = 12,
             if win is not None:
                 return win
     return None
+
+
+def lattice_size(grey: np.ndarray, *, max_seeds: int = 3, sigma: float = 1.5,
+                 points: tuple | None = None) -> tuple[int, int] | None:
+    """Inner corners (along, across) of the largest chessboard-like lattice in `grey`, the longer
+    side first, or None: what a board file should say when it finds nothing (the largest window
+    of a grown lattice at least 97 % filled, 3 x 2 or larger)."""
+    p, score, angles = saddle_points(grey, sigma) if points is None else points
+    if len(p) < 6:
+        return None
+    tree = cKDTree(p)
+    best = None
+    seeds = 0
+    for s in np.argsort(-score):
+        if seeds >= max_seeds:
+            break
+        grid = _seed(p, angles, tree, int(s))
+        if grid is None:
+            continue
+        seeds += 1
+        grid = _grow(p, angles, tree, grid, max_nodes=5000)
+        keys = np.array(list(grid.keys()))
+        lo = keys.min(axis=0)
+        full = np.zeros(tuple(keys.max(axis=0) - lo + 1), bool)
+        full[keys[:, 0] - lo[0], keys[:, 1] - lo[1]] = True
+        csum = np.pad(full.cumsum(0).cumsum(1), ((1, 0), (1, 0)))
+        # the largest window at least 97 % filled (stray junctions beside the board left out)
+        for a in range(full.shape[0], 1, -1):
+            for b in range(full.shape[1], 1, -1):
+                if best is not None and a * b <= best[0] * best[1]:
+                    continue
+                cnt = csum[a:, b:] - csum[:-a, b:] - csum[a:, :-b] + csum[:-a, :-b]
+                if cnt.max() >= 0.97 * a * b:
+                    best = tuple(sorted((a, b), reverse=True))
+    return best if best is not None and best[0] >= 3 and best[1] >= 2 else None
 
 
 def lattice_spacing(grid: np.ndarray) -> np.ndarray:
