@@ -15,7 +15,8 @@ Cameras carry a pose (rotation vector, translation; world to camera) and the int
 gauge: camera 0's pose). The residuals ``projection - xy_px`` are minimised by
 ``scipy.optimize.least_squares`` (trust region reflective, LSMR on the sparse Jacobian of
 :mod:`mocapfj.vision.projection` chained through the group parameters; Triggs et al. 2000) with a
-robust loss; observations beyond 4.5 robust SDs are then dropped and the problem is solved again
+robust loss (graduated: first at a scale of 3 robust SDs of the starting residuals when
+those are large); observations beyond 4.5 robust SDs are then dropped and the problem is solved again
 without the robust loss, from which come the residual SD sigma and the covariance of the camera
 parameters, sigma^2 (J^T J)^-1, by the Schur complement of the group blocks (Triggs et al. 2000,
 §6; Hartley and Zisserman 2003, A6.7).
@@ -191,9 +192,32 @@ class _Problem:
         indices = np.broadcast_to(col[:, None, :], block.shape)[mask]
         return sp.csr_matrix((block[mask], indices, indptr), shape=(2 * n, self.nc + self.G * self.k))
 
-    def solve(self, x0, rows, loss, f_scale, max_nfev):
-        """least_squares in whitened variables z, x = x0 + T z, with T from :func:`_whitening` at x0."""
-        T = _whitening(self.jacobian(x0, rows), self.nc, self.k)
+    def solve(self, x0, rows, loss, f_scale, max_nfev, rounds: int = 60):
+        """least_squares in whitened variables z, x = x_k + T_k z, T_k from :func:`_whitening` at x_k.
+
+        A round ends when least_squares converges; the next round whitens again at its solution
+        (from a poor start the first whitening no longer fits the solution's Jacobian, and LSMR
+        slows down); the rounds stop when one lowers the cost by less than 1e-10 of itself."""
+        x = x0
+        nfev = 0
+        cost = np.inf
+        for _ in range(rounds):
+            res = self._solve_round(x, rows, loss, f_scale, max_nfev)
+            nfev += res.nfev
+            x = res.x
+            done = not res.cost < cost * (1.0 - 1e-10) or res.nfev <= 2
+            cost = min(cost, res.cost)
+            if done:
+                break
+        res.nfev = nfev
+        return res
+
+    def _solve_round(self, x0, rows, loss, f_scale, max_nfev):
+        J0 = self.jacobian(x0, rows)
+        if loss != "linear":                  # whiten the Jacobian the loss will weight (IRLS weights rho')
+            z = (self.residual(x0, rows) / f_scale) ** 2
+            J0 = sp.diags(np.sqrt(_RHO1[loss](z))) @ J0
+        T = _whitening(J0.tocsr(), self.nc, self.k)
         Tt = T.T.tocsr()
         n = x0.size
 
@@ -210,10 +234,14 @@ class _Problem:
         # the trust region starts as large as any Gauss-Newton step can be (|J T dz| = |dz| <= |r|)
         scale = max(float(np.linalg.norm(fun(z0))), 1.0)
         res = least_squares(fun, z0, jac=jac, method="trf", tr_solver="lsmr", loss=loss, f_scale=f_scale,
-                            x_scale=scale, max_nfev=max_nfev, ftol=1e-12, xtol=1e-12, gtol=1e-10,
-                            tr_options={"regularize": False, "atol": 1e-10, "btol": 1e-10})
+                            x_scale=scale, max_nfev=max_nfev or 12, ftol=1e-10, xtol=1e-10, gtol=1e-10,
+                            tr_options={"regularize": False, "atol": 1e-8, "btol": 1e-8})
         res.x = x0 + T @ res.x
         return res
+
+
+_RHO1 = {"soft_l1": lambda z: (1.0 + z) ** -0.5, "huber": lambda z: np.where(z <= 1.0, 1.0, z ** -0.5),
+         "cauchy": lambda z: 1.0 / (1.0 + z), "arctan": lambda z: 1.0 / (1.0 + z * z)}
 
 
 def _blocks(J: sp.csr_matrix, nc: int, k: int):
@@ -313,14 +341,21 @@ def bundle_adjust(kind: str, camera, group, local, xy_px, rvecs, tvecs, intrinsi
     inlier = np.isfinite(r0).all(axis=1)
     rows = rows[inlier]
     initial_rms = float(np.sqrt(np.mean(r0[inlier] ** 2)))
-    res = prob.solve(prob.x0, rows, loss, f_scale_px, max_nfev)
-    nfev = res.nfev
+    # graduated robustness: a start far from the minimum (residuals of tens of px) is first
+    # solved with the loss's scale at 3 robust SDs of its own residuals, so that the robust loss
+    # does not freeze the good observations of a poor start in a wrong basin; then at f_scale_px.
+    x, nfev = prob.x0, 0
+    start_scale = 3.0 * 1.4826 * float(np.median(np.abs(r0[inlier]))) if rows.size else 0.0
+    scales = ([start_scale] if loss != "linear" and start_scale > 2.0 * f_scale_px else []) + [f_scale_px]
+    for f_scale in scales:
+        res = prob.solve(x, rows, loss, f_scale, max_nfev)
+        x, nfev = res.x, nfev + res.nfev
     r = prob.residual(res.x, np.arange(len(camera))).reshape(-1, 2)
     robust_sd = 1.4826 * np.median(np.abs(r[rows]))
     with np.errstate(invalid="ignore"):
         inlier &= np.linalg.norm(r, axis=1) <= outlier_sds * max(robust_sd, 1e-6)
     rows = np.flatnonzero(inlier)
-    res = prob.solve(res.x, rows, "linear", 1.0, max_nfev)
+    res = prob.solve(x, rows, "linear", 1.0, max_nfev)
     nfev += res.nfev
     r = prob.residual(res.x, np.arange(len(camera))).reshape(-1, 2)
     J = prob.jacobian(res.x, rows)

@@ -39,22 +39,26 @@ INTRINSIC_NAMES = ("fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2", "k3")
 
 def _skew(v: np.ndarray) -> np.ndarray:
     """[v]x for v (..., 3): (..., 3, 3)."""
-    z = np.zeros(v.shape[:-1])
-    return np.stack([np.stack([z, -v[..., 2], v[..., 1]], -1),
-                     np.stack([v[..., 2], z, -v[..., 0]], -1),
-                     np.stack([-v[..., 1], v[..., 0], z], -1)], -2)
+    out = np.zeros(v.shape[:-1] + (3, 3))
+    out[..., 0, 1] = -v[..., 2]
+    out[..., 0, 2] = v[..., 1]
+    out[..., 1, 0] = v[..., 2]
+    out[..., 1, 2] = -v[..., 0]
+    out[..., 2, 0] = -v[..., 1]
+    out[..., 2, 1] = v[..., 0]
+    return out
 
 
 def _rotation(r: np.ndarray) -> np.ndarray:
     """Rodrigues: rotation vectors (C, 3) to matrices (C, 3, 3)."""
-    th = np.linalg.norm(r, axis=-1)
+    th = np.sqrt(np.einsum("ci,ci->c", r, r))
     small = th < 1e-12
     ths = np.where(small, 1.0, th)
-    k = r / ths[..., None]
-    K = _skew(k)
-    s, c = np.sin(th)[..., None, None], np.cos(th)[..., None, None]
+    K = _skew(r / ths[:, None])
+    s, c = np.sin(th)[:, None, None], np.cos(th)[:, None, None]
     R = np.eye(3) + s * K + (1.0 - c) * (K @ K)
-    R[small] = np.eye(3) + _skew(r[small])
+    if small.any():
+        R[small] = np.eye(3) + _skew(r[small])
     return R
 
 
@@ -78,7 +82,8 @@ def rotation_jacobian(r) -> tuple[np.ndarray, np.ndarray]:
     small = th2 < 1e-20
     th2s = np.where(small, 1.0, th2)
     M = (np.einsum("ci,cj->cij", r, r) + (np.swapaxes(R, 1, 2) - np.eye(3)) @ _skew(r)) / th2s[:, None, None]
-    M[small] = np.eye(3)
+    if small.any():
+        M[small] = np.eye(3)
     return R, M
 
 

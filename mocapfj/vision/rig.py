@@ -27,7 +27,7 @@ from ..rotations import matrix_from_rotvec, rotvec_from_matrix
 from ..types import Board, Camera, Detections, Rig
 from .bundle import POSE_NAMES, BundleResult, bundle_adjust
 from .posegraph import average_rotations, average_translations, chordal_mean, components
-from .projection import INTRINSIC_NAMES, camera_parameters
+from .projection import INTRINSIC_NAMES, camera_parameters, rotation_jacobian
 
 __all__ = ["RigCalibration", "CameraSummary", "calibrate_rig", "intrinsic_mask", "board_corner_table",
            "summarize_cameras", "camera_position_std"]
@@ -70,6 +70,9 @@ class CameraSummary:
         Optical centre in the world, m.
     position_std_m : (3,)
         Its SD per axis, m.
+    rotation_std_rad : (3,)
+        SD of its orientation about its own x, y, z axes (the error psi of R_est = exp([psi]) R,
+        free of the rotation vector's chart), rad.
     extra : dict
         Stage-specific numbers (views, residual in mm, ...).
     """
@@ -81,12 +84,14 @@ class CameraSummary:
     std: dict
     position_m: np.ndarray
     position_std_m: np.ndarray
+    rotation_std_rad: np.ndarray
     extra: dict = field(default_factory=dict)
 
     def to_dict(self) -> dict:
         d = {"name": self.name, "rms_px": self.rms_px, "n_observations": self.n_observations,
              "n_outliers": self.n_outliers, "std": dict(self.std), "position_m": self.position_m.tolist(),
-             "position_std_m": self.position_std_m.tolist()}
+             "position_std_m": self.position_std_m.tolist(),
+             "rotation_std_deg": np.degrees(self.rotation_std_rad).tolist()}
         d.update(self.extra)
         return d
 
@@ -185,11 +190,14 @@ def summarize_cameras(ba: BundleResult, names: Sequence[str], camera_index: np.n
         cov6 = np.zeros((6, 6))
         if len(idx6) == 6:
             cov6 = ba.covariance[np.ix_(idx6, idx6)]
-        R = matrix_from_rotvec(ba.rvecs[c])
+        R, M = rotation_jacobian(ba.rvecs[c][None])
+        A = R[0] @ M[0]                                   # psi = R M d(rvec)
+        rot_sd = np.sqrt(np.maximum(np.diag(A @ cov6[:3, :3] @ A.T), 0.0))
+        R = R[0]
         out.append(CameraSummary(
             name=str(name), rms_px=float(np.sqrt(np.mean(r**2))) if r.size else float("nan"),
             n_observations=int(sel.sum()), n_outliers=int(n_observations_total[c] - sel.sum()), std=std,
-            position_m=-R.T @ ba.tvecs[c], position_std_m=camera_position_std(ba.rvecs[c], ba.tvecs[c], cov6)))
+            position_m=-R.T @ ba.tvecs[c], position_std_m=camera_position_std(ba.rvecs[c], ba.tvecs[c], cov6), rotation_std_rad=rot_sd))
     return out
 
 
@@ -217,18 +225,28 @@ def _check_detections(det: Detections, n_cameras: int | None, where: str) -> Non
 
 
 def _pnp(p_board: np.ndarray, xy: np.ndarray, cam: Camera) -> tuple[np.ndarray, np.ndarray, float]:
-    """Board pose in the camera (R, t) by IPPE + LM refinement, and its reprojection RMS (px)."""
+    """Board pose in the camera (R, t) by IPPE + LM refinement, and its reprojection RMS (px).
+
+    Corners off by more than max(3 px, 5 x the median residual) are set aside and the pose refitted
+    (twice at most): a misdetected corner must not spoil the start of the bundle adjustment."""
     obj = p_board.astype(np.float64)
     img = xy.astype(np.float64)
-    n, rvecs, tvecs, errs = cv2.solvePnPGeneric(obj, img, cam.K, cam.dist, flags=cv2.SOLVEPNP_IPPE)
-    best = int(np.argmin(np.asarray(errs).ravel())) if n else 0
-    if not n:
-        ok, rv, tv = cv2.solvePnP(obj, img, cam.K, cam.dist, flags=cv2.SOLVEPNP_SQPNP)
-    else:
-        rv, tv = rvecs[best], tvecs[best]
-    rv, tv = cv2.solvePnPRefineLM(obj, img, cam.K, cam.dist, rv.copy(), tv.copy())
-    proj, _ = cv2.projectPoints(obj, rv, tv, cam.K, cam.dist)
-    rms = float(np.sqrt(np.mean((proj[:, 0] - img) ** 2)))
+    keep = np.ones(len(obj), bool)
+    for _ in range(3):
+        n, rvecs, tvecs, errs = cv2.solvePnPGeneric(obj[keep], img[keep], cam.K, cam.dist, flags=cv2.SOLVEPNP_IPPE)
+        if n:
+            best = int(np.argmin(np.asarray(errs).ravel()))
+            rv, tv = rvecs[best], tvecs[best]
+        else:
+            _, rv, tv = cv2.solvePnP(obj[keep], img[keep], cam.K, cam.dist, flags=cv2.SOLVEPNP_SQPNP)
+        rv, tv = cv2.solvePnPRefineLM(obj[keep], img[keep], cam.K, cam.dist, rv.copy(), tv.copy())
+        proj, _ = cv2.projectPoints(obj, rv, tv, cam.K, cam.dist)
+        e = np.linalg.norm(proj[:, 0] - img, axis=1)
+        new = e <= max(3.0, 5.0 * float(np.median(e[keep])))
+        if (new == keep).all() or new.sum() < 4:
+            break
+        keep = new
+    rms = float(np.sqrt(np.mean(e[keep] ** 2)))
     return matrix_from_rotvec(rv.ravel()), tv.ravel(), rms
 
 
@@ -415,5 +433,6 @@ def rig_metadata(method: str, summaries: Sequence[CameraSummary], sigma_px: floa
         "units": "m", "calibrated_by": "mocapfj", "method": method, "gauge": gauge, "sigma_px": float(sigma_px),
         "refined_intrinsics": list(refined),
         "cameras": [{"name": s.name, "rms_px": s.rms_px, "n_observations": s.n_observations,
-                     "std": dict(s.std), "position_std_m": s.position_std_m.tolist()} for s in summaries],
+                     "std": dict(s.std), "position_std_m": s.position_std_m.tolist(),
+                     "rotation_std_deg": np.degrees(s.rotation_std_rad).tolist()} for s in summaries],
     }
