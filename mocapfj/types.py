@@ -27,6 +27,7 @@ __all__ = [
     "Camera",
     "Rig",
     "Board",
+    "Wand",
     "Recording",
     "JointGeometry",
     "JointAngles",
@@ -321,6 +322,46 @@ class Board:
     tag_m: float | None = None
     spacing_m: float | None = None
     family: str | None = None
+
+
+@dataclass(frozen=True, eq=False)
+class Wand:
+    """A calibration wand and its L-frame (``calibration/wands/*.toml``; docs/formats.md).
+
+    Attributes
+    ----------
+    markers_m : (K,) float
+        Positions of the wand's K >= 2 collinear markers along it, metres from its first marker:
+        0 first, strictly increasing (the wand length is the last).
+    lframe_m : (L, 3) float or None
+        Positions of the L-frame's L >= 3 markers in the world frame it defines (origin and axes),
+        metres; None when the wand comes without one.
+    name : str
+    """
+
+    markers_m: np.ndarray
+    lframe_m: np.ndarray | None = None
+    name: str = "wand"
+
+    def __post_init__(self) -> None:
+        m = check_array(self.markers_m, "wand markers_m", ("K",), finite=True)
+        if m.size < 2 or m[0] != 0.0 or not (np.diff(m) > 0).all():
+            raise InputError(None, "wand markers_m", "at least 2 distances along the wand from its first marker, "
+                             "starting at 0 and strictly increasing (m)", m.tolist())
+        object.__setattr__(self, "markers_m", freeze(m))
+        if self.lframe_m is not None:
+            L = check_array(self.lframe_m, "lframe markers_m", ("L", 3), finite=True)
+            centred = L - L.mean(axis=0) if L.shape[0] else L
+            if L.shape[0] < 3 or np.linalg.svd(centred, compute_uv=False)[1] < 1e-3 * max(np.abs(centred).max(), 1e-12):
+                raise InputError(None, "lframe markers_m", "at least 3 marker positions (m), not all on one line",
+                                 L.tolist())
+            object.__setattr__(self, "lframe_m", freeze(L))
+        object.__setattr__(self, "name", str(self.name))
+
+    @property
+    def length_m(self) -> float:
+        """Distance between the first and the last marker, m."""
+        return float(self.markers_m[-1])
 
 
 @dataclass(frozen=True, eq=False)
