@@ -16,12 +16,12 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InputError
-from ..types import BOARD_TYPES, Board, Camera, Rig
+from ..types import BOARD_TYPES, Board, Camera, Rig, Wand
 from ..rotations import matrix_from_rotvec, rotvec_from_matrix
 from .c3d import unit_factor
 from .tomlio import check_format, read_toml, require, write_toml
 
-__all__ = ["read_rig", "write_rig", "read_board", "board_from_table", "write_board"]
+__all__ = ["read_rig", "write_rig", "read_board", "board_from_table", "write_board", "read_wand", "write_wand"]
 
 
 def _array(path, table, key, where, shape):
@@ -74,8 +74,22 @@ def read_rig(path: str | os.PathLike[str], units: str | None = None) -> Rig:
     return Rig(cameras=tuple(cameras), metadata=meta)
 
 
+def _finite_metadata(value, where: str) -> None:
+    """Refuse NaN or infinite numbers anywhere in the metadata: a rig file never carries them."""
+    if isinstance(value, dict):
+        for k, v in value.items():
+            _finite_metadata(v, f"{where}.{k}")
+    elif isinstance(value, (list, tuple)):
+        for i, v in enumerate(value):
+            _finite_metadata(v, f"{where}[{i}]")
+    elif isinstance(value, float) and not np.isfinite(value):
+        raise InputError(None, where, "a finite number (a rig file never holds NaN or infinity)", value)
+
+
 def write_rig(path: str | os.PathLike[str], rig: Rig) -> None:
-    """Write a rig TOML (metres), atomically."""
+    """Write a rig TOML (metres), atomically. Cameras are written as ``cam_0``, ``cam_1``, ... in
+    their order; the metadata (units, residuals, SDs) must be finite (the cameras are, by type)."""
+    _finite_metadata(dict(rig.metadata), "metadata")
     doc: dict = {}
     for i, cam in enumerate(rig.cameras):
         doc[f"cam_{i}"] = {
@@ -142,3 +156,36 @@ def write_board(path: str | os.PathLike[str], board: Board) -> None:
     if board.inverted:
         tab["inverted"] = True
     write_toml(path, {"format": "mocapfj.board/1", "board": tab})
+
+
+def read_wand(path: str | os.PathLike[str]) -> Wand:
+    """Read a wand TOML (``calibration/wands/*.toml``; docs/formats.md): ``[wand]`` with
+    ``markers_m`` (distances along the wand from its first marker, m) and an optional
+    ``[lframe]`` with ``markers_m`` (L-frame marker positions in the world it defines, m)."""
+    path = Path(path)
+    doc = read_toml(path)
+    if "format" in doc:
+        check_format(path, doc, "wand", 1)
+    tab = require(path, doc, "wand", dict)
+    m = _array(path, tab, "markers_m", "wand", None)
+    if m.ndim != 1:
+        raise InputError(path, "wand.markers_m", "a list of distances in metres", f"shape {m.shape}")
+    lframe = None
+    if "lframe" in doc:
+        lt = require(path, doc, "lframe", dict)
+        lframe = _array(path, lt, "markers_m", "lframe", None)
+        if lframe.ndim != 2 or lframe.shape[1] != 3:
+            raise InputError(path, "lframe.markers_m", "a list of [x, y, z] positions in metres", f"shape {lframe.shape}")
+    try:
+        return Wand(markers_m=m, lframe_m=lframe,
+                    name=str(require(path, tab, "name", str, "wand", default=path.stem)))
+    except InputError as e:
+        raise InputError(path, e.field.replace("wand ", "wand.").replace("lframe ", "lframe."), e.expected, e.got) from None
+
+
+def write_wand(path: str | os.PathLike[str], wand: Wand) -> None:
+    """Write a wand TOML, atomically."""
+    doc = {"format": "mocapfj.wand/1", "wand": {"name": wand.name, "markers_m": wand.markers_m.tolist()}}
+    if wand.lframe_m is not None:
+        doc["lframe"] = {"markers_m": wand.lframe_m.tolist()}
+    write_toml(path, doc)

@@ -71,6 +71,8 @@ class BundleResult:
         Residual evaluations of both solves.
     initial_rms_px, rms_px : float
         RMS of the residual vector over the inliers at the start and at the solution.
+    points_world : (N, 3)
+        Each observation's 3D point at the solution, m.
     """
 
     rvecs: np.ndarray
@@ -86,6 +88,7 @@ class BundleResult:
     nfev: int
     initial_rms_px: float
     rms_px: float
+    points_world: np.ndarray
 
     def std(self, camera: int, name: str) -> float:
         """SD of one camera parameter (0 for a parameter held fixed)."""
@@ -368,4 +371,5 @@ def bundle_adjust(kind: str, camera, group, local, xy_px, rvecs, tvecs, intrinsi
     rv, tv, iv, gr = prob.unpack(res.x)
     return BundleResult(rvecs=rv, tvecs=tv, intrinsics=iv, groups=gr, residual_px=r, inlier=inlier, sigma_px=sigma,
                         covariance=cov, names=prob.names, n_parameters=n_par, nfev=nfev,
-                        initial_rms_px=initial_rms, rms_px=float(np.sqrt(np.mean(r[rows] ** 2))))
+                        initial_rms_px=initial_rms, rms_px=float(np.sqrt(np.mean(r[rows] ** 2))),
+                        points_world=prob.points(gr, np.arange(len(camera))))

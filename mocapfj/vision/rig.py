@@ -158,8 +158,9 @@ def _camera_dict(cam: Camera) -> dict:
             "translation_m": cam.t_cam_world.tolist()}
 
 
-def camera_position_std(rvec: np.ndarray, tvec: np.ndarray, cov6: np.ndarray) -> np.ndarray:
-    """SD (3,) of the optical centre -R(r)^T t from the covariance (6, 6) of (r, t)."""
+def camera_position_std(rvec: np.ndarray, tvec: np.ndarray, cov6: np.ndarray, R_world_gauge=None) -> np.ndarray:
+    """SD (3,) of the optical centre -R(r)^T t from the covariance (6, 6) of (r, t), along the axes
+    of the world R_world_gauge maps the gauge frame into (default: the gauge frame itself)."""
     def centre(x):
         return -matrix_from_rotvec(x[:3]).T @ x[3:]
 
@@ -169,12 +170,17 @@ def camera_position_std(rvec: np.ndarray, tvec: np.ndarray, cov6: np.ndarray) ->
         e = np.zeros(6)
         e[k] = 1e-7
         J[:, k] = (centre(x0 + e) - centre(x0 - e)) / 2e-7
+    if R_world_gauge is not None:
+        J = np.asarray(R_world_gauge) @ J
     return np.sqrt(np.maximum(np.diag(J @ cov6 @ J.T), 0.0))
 
 
 def summarize_cameras(ba: BundleResult, names: Sequence[str], camera_index: np.ndarray,
-                      n_observations_total: np.ndarray) -> list[CameraSummary]:
-    """Per camera RMS, counts, SDs and centre from a bundle adjustment."""
+                      n_observations_total: np.ndarray, R_world_gauge=None, t_world_gauge=None) -> list[CameraSummary]:
+    """Per camera RMS, counts, SDs and centre from a bundle adjustment; positions in the world
+    p_world = R_world_gauge p_gauge + t_world_gauge when given (SDs rotated alike)."""
+    Rw = np.eye(3) if R_world_gauge is None else np.asarray(R_world_gauge, dtype=np.float64)
+    tw = np.zeros(3) if t_world_gauge is None else np.asarray(t_world_gauge, dtype=np.float64)
     out = []
     for c, name in enumerate(names):
         sel = ba.inlier & (camera_index == c)
@@ -197,7 +203,8 @@ def summarize_cameras(ba: BundleResult, names: Sequence[str], camera_index: np.n
         out.append(CameraSummary(
             name=str(name), rms_px=float(np.sqrt(np.mean(r**2))) if r.size else float("nan"),
             n_observations=int(sel.sum()), n_outliers=int(n_observations_total[c] - sel.sum()), std=std,
-            position_m=-R.T @ ba.tvecs[c], position_std_m=camera_position_std(ba.rvecs[c], ba.tvecs[c], cov6), rotation_std_rad=rot_sd))
+            position_m=Rw @ (-R.T @ ba.tvecs[c]) + tw,
+            position_std_m=camera_position_std(ba.rvecs[c], ba.tvecs[c], cov6, Rw), rotation_std_rad=rot_sd))
     return out
 
 
