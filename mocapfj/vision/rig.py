@@ -26,10 +26,10 @@ from ..errors import InputError
 from ..rotations import matrix_from_rotvec, rotvec_from_matrix
 from ..types import Board, Camera, Detections, Rig
 from .bundle import POSE_NAMES, BundleResult, bundle_adjust
-from .posegraph import average_rotations, average_translations, chordal_mean, components
+from .posegraph import average_rotations, average_translations, chordal_mean, components, log_rotation
 from .projection import INTRINSIC_NAMES, camera_parameters, rotation_jacobian
 
-__all__ = ["RigCalibration", "CameraSummary", "calibrate_rig", "intrinsic_mask", "board_corner_table",
+__all__ = ["RigCalibration", "CameraSummary", "calibrate_rig", "intrinsic_mask", "board_corner_table", "symmetry_maps",
            "summarize_cameras", "camera_position_std"]
 
 DEFAULT_INTRINSICS = ("fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2")
@@ -209,14 +209,67 @@ def summarize_cameras(ba: BundleResult, names: Sequence[str], camera_index: np.n
 
 
 def board_corner_table(board: Board) -> tuple[np.ndarray, np.ndarray]:
-    """Corner ids and board-frame positions (N, 3) m of `board` (part of the boards module when
-    present, else the renderer's definition; both follow docs/conventions.md)."""
-    try:
-        from .boards import board_points
-    except ImportError:
-        from ..synth.images import board_points
+    """Corner ids and board-frame positions (N, 3) m of `board` (:func:`mocapfj.vision.boards.board_points`)."""
+    from .boards import board_points
+
     ids, p = board_points(board)
     return np.asarray(ids, dtype=np.int64), np.asarray(p, dtype=np.float64)
+
+
+def symmetry_maps(board: Board) -> list[np.ndarray]:
+    """Id maps of the orientations a detection cannot tell apart (:func:`mocapfj.vision.boards.board_symmetry`):
+    for each, ``m[id]`` is the corner the id names if the board lay turned by k quarter (or half)
+    turns in its plane; the first map is the identity."""
+    from .boards import board_symmetry
+
+    n_sym = board_symmetry(board)
+    ids, p = board_corner_table(board)
+    c = p[:, :2].mean(axis=0)
+    maps = []
+    for k in range(n_sym):
+        a = 2.0 * np.pi * k / n_sym
+        Rz = np.array([[np.cos(a), -np.sin(a)], [np.sin(a), np.cos(a)]])
+        q = (p[:, :2] - c) @ Rz.T + c
+        d = np.linalg.norm(q[:, None, :] - p[None, :, :2], axis=2)
+        maps.append(ids[np.argmin(d, axis=1)])
+    return maps
+
+
+def _resolve_symmetry(pose: dict, maps, p_of, cams, max_pnp_rms_px: float) -> dict:
+    """Give each view of a symmetric board the orientation that agrees with the other cameras.
+
+    In each frame the lowest-numbered camera keeps its detector's orientation; every other camera
+    b takes the orientation whose relative rotation to it is nearest the pair's consensus, the
+    candidate relative rotation that most other frames' candidates of the pair agree with (within
+    3 deg)."""
+    cand = {}
+    for (c, f), (R, t, ids, xy) in pose.items():
+        opts = []
+        for m in maps:
+            Rk, tk, rms = _pnp(p_of(m[ids]), xy, cams[c])
+            opts.append((Rk, tk, m[ids], xy) if rms <= max_pnp_rms_px else None)
+        cand[(c, f)] = opts
+    by_frame: dict[int, list[int]] = {}
+    for (c, f) in sorted(pose):
+        by_frame.setdefault(f, []).append(c)
+    pair_samples: dict = {}
+    for f, cs in by_frame.items():
+        r = cs[0]
+        for b in cs[1:]:
+            for k, o in enumerate(cand[(b, f)]):
+                if o is not None:
+                    pair_samples.setdefault((r, b), []).append((f, k, pose[(r, f)][0] @ o[0].T))
+    out = dict(pose)
+    for (r, b), samples in pair_samples.items():
+        Rs = np.array([s[2] for s in samples])
+        ang = np.linalg.norm(log_rotation(np.einsum("nij,mkj->nmik", Rs, Rs).reshape(-1, 3, 3)), axis=1)
+        support = (ang.reshape(len(Rs), len(Rs)) < np.radians(3.0)).sum(axis=1)
+        consensus = Rs[int(np.argmax(support))]
+        for f in sorted({s[0] for s in samples}):
+            ks = [(np.linalg.norm(log_rotation(s[2] @ consensus.T)), s[1]) for s in samples if s[0] == f]
+            best = min(ks)[1]
+            out[(b, f)] = cand[(b, f)][best]
+    return out
 
 
 def _check_detections(det: Detections, n_cameras: int | None, where: str) -> None:
@@ -257,13 +310,16 @@ def _pnp(p_board: np.ndarray, xy: np.ndarray, cam: Camera) -> tuple[np.ndarray, 
     return matrix_from_rotvec(rv.ravel()), tv.ravel(), rms
 
 
-def _initial_intrinsics(views, p_of, size) -> tuple[np.ndarray, np.ndarray]:
-    """cv2.calibrateCamera (k3 fixed at 0) on one camera's views, as a start."""
-    obj = [p_of(ids).astype(np.float32) for ids, _ in views]
-    img = [xy.astype(np.float32) for _, xy in views]
-    _, K, dist, _, _ = cv2.calibrateCamera(obj, img, tuple(int(s) for s in size), None, None,
-                                           flags=cv2.CALIB_FIX_K3)
-    return K, dist.ravel()
+def _initial_intrinsics(views, board: Board, size, name: str) -> tuple[np.ndarray, np.ndarray]:
+    """One camera's starting intrinsics from its own views: :func:`mocapfj.vision.intrinsics.calibrate_intrinsics`
+    (k1, k2, p1, p2; outlier views and corners rejected)."""
+    from .boards import BoardDetection
+    from .intrinsics import calibrate_intrinsics
+
+    dets = [BoardDetection(ids, xy, tuple(size), "given") for ids, xy in views]
+    res = calibrate_intrinsics(dets, board, names=[f"{name} frame {f}" for f in range(len(views))], model="no_k3",
+                               camera_name=name)
+    return res.camera.K, np.r_[res.camera.dist[:4], 0.0]
 
 
 def calibrate_rig(detections: Detections, board: Board, cameras: Rig | Sequence[Camera] | None = None, *,
@@ -279,8 +335,8 @@ def calibrate_rig(detections: Detections, board: Board, cameras: Rig | Sequence[
         board's corner id (:func:`board_corner_table`).
     board : Board
     cameras : Rig or sequence of Camera, optional
-        Starting intrinsics (their poses are ignored). Without it each camera starts from
-        ``cv2.calibrateCamera`` on its own views, which needs `image_sizes`.
+        Starting intrinsics (their poses are ignored). Without it each camera starts from its own
+        views (:func:`mocapfj.vision.intrinsics.calibrate_intrinsics`, k3 = 0), which needs `image_sizes`.
     image_sizes : sequence of (width, height), optional
         Per camera, when `cameras` is not given.
     names : sequence of str, optional
@@ -352,7 +408,7 @@ def calibrate_rig(detections: Detections, board: Board, cameras: Rig | Sequence[
     if cams0 is None:
         cams0 = []
         for c in range(n_cam):
-            K, dist = _initial_intrinsics([(ids, xy) for _, ids, xy in views[c]], p_of, image_sizes[c])
+            K, dist = _initial_intrinsics([(ids, xy) for _, ids, xy in views[c]], board, image_sizes[c], names[c])
             cams0.append(Camera(names[c], tuple(image_sizes[c]), K, dist, np.eye(3), np.zeros(3)))
         cams0 = tuple(cams0)
     # per-view PnP
@@ -364,6 +420,9 @@ def calibrate_rig(detections: Detections, board: Board, cameras: Rig | Sequence[
                 dropped.append({"camera": c, "frame": f, "reason": f"PnP RMS {rms:.1f} px (> {max_pnp_rms_px} px)"})
                 continue
             pose[(c, f)] = (R, t, ids, xy)
+    maps = symmetry_maps(board)
+    if len(maps) > 1:
+        pose = _resolve_symmetry(pose, maps, p_of, cams0, max_pnp_rms_px)
     # co-observation samples
     by_frame: dict[int, list[int]] = {}
     for (c, f) in sorted(pose):
