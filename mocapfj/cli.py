@@ -20,7 +20,6 @@ IDENTIFY_METHODS = ("motor_first", "two_step")   # mocapfj.ident.IDENTIFY_METHOD
 
 # Commands of the design that later versions fill in: (name, one-line help).
 PLANNED = [
-    ("calibrate-rig", "calibrate a multi-camera rig (board or wand)"),
     ("triangulate", "2D detections to labelled 3D marker trajectories"),
     ("frf", "multisine frequency response estimation"),
     ("run", "the whole chain on a recording"),
@@ -38,10 +37,11 @@ def _work(args):
 def _inputs(args) -> list:
     """The paths a command reads (that --out must keep clear of)."""
     out = []
-    for name in ("scenario", "recording", "model", "validation", "board"):
+    for name in ("scenario", "recording", "model", "validation", "board", "wand", "detections", "intrinsics", "lframe"):
         if getattr(args, name, None):
             out.append(getattr(args, name))
-    return out + list(getattr(args, "recordings", None) or []) + list(getattr(args, "images", None) or [])
+    views = [p for paths in (getattr(args, "camera", None) or []) for p in paths]
+    return out + list(getattr(args, "recordings", None) or []) + list(getattr(args, "images", None) or []) + views
 
 
 def _emit(args, summary: dict, human: Callable[[dict], str]) -> None:
@@ -268,6 +268,36 @@ def _cmd_calibrate_camera(args) -> int:
     return 0
 
 
+def _cmd_calibrate_rig(args) -> int:
+    from .pipeline.calibrate import run_calibrate_rig
+
+    s = run_calibrate_rig(_work(args), board=args.board, cameras=args.camera, wand=args.wand,
+                          detections=args.detections, intrinsics=args.intrinsics, lframe=args.lframe,
+                          refine_intrinsics=args.refine_intrinsics, every=args.every, progress=not args.json)
+
+    def human(s):
+        head = (f"rig of {len(s['cameras'])} cameras from {'board views' if s['method'] == 'board' else 'a wand wave'}: "
+                f"RMS {s['rms_px']:.3f} px (start {s['initial_rms_px']:.2f} px), residual SD {s['sigma_px']:.3f} px, "
+                f"intrinsics refined: {', '.join(s['refined_intrinsics']) or 'none'}")
+        lines = [head]
+        if s["method"] == "wand":
+            lines.append(f"  wand length {s['wand_length_mean_mm']:.3f} mm (nominal {s['wand_length_mm']:.1f}), SD "
+                         f"{s['wand_length_sd_mm']:.3f} mm over {s['n_wand_lengths']} frames; world: {s['world']}"
+                         + (f" (L-frame fit {s['lframe_rms_mm']:.2f} mm RMS)" if s.get("lframe_rms_mm") is not None else ""))
+        for c in s["cameras"]:
+            pos = ", ".join(f"{x:+.4f}" for x in c["position_m"])
+            sd = ", ".join(f"{x * 1000:.2f}" for x in c["position_std_m"])
+            extra = f", {c['rms_mm']:.2f} mm" if "rms_mm" in c else ""
+            lines.append(f"  {c['name']}: RMS {c['rms_px']:.3f} px{extra}, {c['n_observations']} points "
+                         f"({c['n_outliers']} outliers), centre [{pos}] m +- [{sd}] mm, fx {c['fx']:.2f}"
+                         + (f" +- {c['std']['fx']:.2f}" if "fx" in c["std"] else "") + " px")
+        lines.append(f"  wrote {args.out} ({', '.join(s['files'].values())})")
+        return "\n".join(lines)
+
+    _emit(args, s, human)
+    return 0
+
+
 def _cmd_inspect(args) -> int:
     from .pipeline import inspect_path
 
@@ -364,6 +394,28 @@ def build_parser() -> argparse.ArgumentParser:
     cc.add_argument("--every", type=int, default=1, help="use every N-th video frame (default 1)")
     cc.add_argument("--json", action="store_true", help="print a JSON summary on stdout")
     cc.set_defaults(func=_cmd_calibrate_camera)
+
+    cr = sub.add_parser("calibrate-rig", help="calibrate a multi-camera rig (board views or a wand wave)",
+                        description="Board: --board B.toml and one --camera per camera with its views (the k-th view "
+                                    "of every camera is frame k). Wand: --wand W.toml --detections blobs.csv "
+                                    "--intrinsics rig.toml [--lframe lframe.csv].")
+    cr.add_argument("--out", required=True, help="output directory")
+    cr.add_argument("--board", default=None, help="calibration target TOML (calibration/boards/*.toml)")
+    cr.add_argument("--camera", action="append", nargs="+", default=None, metavar="VIEWS",
+                    help="one camera's views: images, a directory of them or a video (repeat per camera, in order)")
+    cr.add_argument("--wand", default=None, help="wand TOML (calibration/wands/*.toml): marker spacing, L-frame")
+    cr.add_argument("--detections", default=None,
+                    help="wand blobs: CSV with frame, camera, x_px, y_px[, point_id] (docs/formats.md)")
+    cr.add_argument("--lframe", default=None, help="the still L-frame's blobs (same CSV columns): sets the world")
+    cr.add_argument("--intrinsics", default=None,
+                    help="rig TOML with each camera's intrinsics (required for --wand; a start for --board)")
+    cr.add_argument("--refine-intrinsics", default=None,
+                    choices=["fixed", "default", "all"],
+                    help="intrinsics refined with the poses: fixed, default (fx fy cx cy k1 k2 p1 p2) or all "
+                         "(default: default for boards, fixed for a wand)")
+    cr.add_argument("--every", type=int, default=1, help="use every N-th video frame (default 1)")
+    cr.add_argument("--json", action="store_true", help="print a JSON summary on stdout")
+    cr.set_defaults(func=_cmd_calibrate_rig)
 
     i = sub.add_parser("inspect", help="check and summarise a recording bundle or a C3D/TRC file")
     i.add_argument("recording", help="bundle directory, recording.toml, or marker file")

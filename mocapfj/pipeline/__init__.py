@@ -4,15 +4,16 @@
 - :mod:`.core`: summaries (``inspect``), ``simulate``, the demo, the joints stage's files.
 - :mod:`.identify`: ``identify`` (identify.json, Table-I-style tables).
 - :mod:`.discover`: ``discover`` (discovery.json, model.toml, residuals.csv).
-- :mod:`.calibrate`: ``calibrate-camera`` (camera.toml, intrinsics.json, detections.json, coverage.png).
+- :mod:`.calibrate`: ``calibrate-camera`` (camera.toml, intrinsics.json, detections.json, coverage.png) and
+  ``calibrate-rig`` (rig.toml, calibrate_rig.json, detections.csv).
 """
 
 from .core import (default_scenario, inspect_path, run_demo, run_joints, run_simulate, summarize_markers,
                    summarize_recording, write_joints)
 from .discover import run_discover
 from .identify import run_identify, write_tables
-from .calibrate import run_calibrate_camera
+from .calibrate import run_calibrate_camera, run_calibrate_rig
 
 __all__ = ["default_scenario", "inspect_path", "run_demo", "run_joints", "run_simulate", "summarize_markers",
            "summarize_recording", "write_joints", "run_discover", "run_identify", "write_tables"]
-__all__ += ["run_calibrate_camera"]
+__all__ += ["run_calibrate_camera", "run_calibrate_rig"]

@@ -12,7 +12,7 @@ from ..errors import InputError
 from ..io import write_json
 
 __all__ = ["IMAGE_SUFFIXES", "VIDEO_SUFFIXES", "expand_view_paths", "read_views", "detect_views",
-           "run_calibrate_camera"]
+           "run_calibrate_camera", "run_calibrate_rig"]
 
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".tif", ".tiff", ".bmp", ".pgm", ".ppm", ".webp")
 VIDEO_SUFFIXES = (".mp4", ".avi", ".mov", ".mkv", ".m4v", ".webm", ".mpg", ".mpeg")
@@ -189,4 +189,90 @@ def run_calibrate_camera(images: Sequence[str | os.PathLike], board: str | os.Pa
     full["covariance"] = result.covariance
     full["poses"] = [{"name": v.name, "rvec": v.rvec, "tvec_m": v.tvec} for v in result.views if v.status == "used"]
     write_json(out / "intrinsics.json", full)
+    return summary
+
+
+def run_calibrate_rig(out: str | Path, *, board: str | os.PathLike | None = None,
+                      cameras: Sequence[Sequence[str | os.PathLike]] | None = None,
+                      wand: str | os.PathLike | None = None, detections: str | os.PathLike | None = None,
+                      intrinsics: str | os.PathLike | None = None, lframe: str | os.PathLike | None = None,
+                      refine_intrinsics: str | None = None, every: int = 1, progress: bool = True) -> dict:
+    """``mocapfj calibrate-rig``: a multi-camera rig from board views or from a wand wave.
+
+    Board: `board` and, per camera, its views (`cameras[c]`: images, directories or videos; the
+    k-th view of every camera is frame k); `intrinsics` (a rig file) gives starting intrinsics,
+    else each camera starts from its own views (:func:`mocapfj.vision.rig.calibrate_rig`).
+    Wand: `wand` (a wand TOML), `detections` (CSV: frame, camera, x_px, y_px[, point_id]),
+    `intrinsics` (required) and optionally `lframe` (CSV of the still L-frame's blobs)
+    (:func:`mocapfj.vision.wand.calibrate_wand`).
+
+    Writes into OUT ``rig.toml`` (anipose-compatible, metres; ``[metadata]`` with residuals and
+    SDs), ``calibrate_rig.json`` (the summary with the covariance of the camera parameters) and,
+    for boards, ``detections.csv`` (the corners found). Returns the summary printed by ``--json``.
+    """
+    import numpy as np
+
+    from ..io import read_detections, write_detections
+    from ..io.calib import read_board, read_rig, read_wand, write_rig
+    from ..types import Detections
+
+    if (board is None) == (wand is None):
+        raise InputError(None, "--board/--wand", "exactly one of --board (board views) or --wand (a wand wave)",
+                         "both" if board is not None else "neither")
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    files = {"rig": "rig.toml", "summary": "calibrate_rig.json"}
+    if board is not None:
+        from ..vision.rig import calibrate_rig
+
+        if not cameras or len(cameras) < 2:
+            raise InputError(None, "--camera", "the views of at least two cameras (one --camera per camera)",
+                             f"{len(cameras or [])} camera(s)")
+        if detections is not None or lframe is not None:
+            raise InputError(None, "--detections/--lframe", "nothing with --board (they belong to --wand)", "given")
+        brd = read_board(board)
+        start = read_rig(intrinsics) if intrinsics is not None else None
+        if start is not None and len(start.cameras) != len(cameras):
+            raise InputError(intrinsics, "cameras", f"{len(cameras)} cameras (one per --camera)",
+                             f"{len(start.cameras)} camera(s)")
+        rows, sizes = [], []
+        for c, paths in enumerate(cameras):
+            _, dets = detect_views(expand_view_paths(paths), brd, every=every, progress=progress)
+            found = [(k, d) for k, d in enumerate(dets) if d is not None]
+            if not found:
+                raise InputError(str(paths[0]), f"camera {c} views", "views in which the board is found", "none")
+            sizes.append(found[0][1].image_size)
+            if start is not None and tuple(start.cameras[c].size) != tuple(sizes[-1]):
+                raise InputError(intrinsics, f"camera {c} size", f"the size of its images {list(sizes[-1])}",
+                                 list(start.cameras[c].size))
+            for k, d in found:
+                rows.append((np.full(d.ids.size, k), np.full(d.ids.size, c), d.xy_px, d.ids))
+        det = Detections(*(np.concatenate([r[i] for r in rows]) for i in range(4)))
+        result = calibrate_rig(det, brd, start, image_sizes=sizes if start is None else None,
+                               intrinsics=refine_intrinsics or "default", source="board views")
+        write_detections(out / "detections.csv", det)
+        files["detections"] = "detections.csv"
+    else:
+        from ..vision.wand import calibrate_wand
+
+        if cameras:
+            raise InputError(None, "--camera", "no board views with --wand (the blobs come from --detections)",
+                             "given")
+        if detections is None or intrinsics is None:
+            raise InputError(None, "--detections/--intrinsics" if detections is None else "--intrinsics",
+                             "the wand's blob detections (CSV) and the cameras' intrinsics (a rig file)", "missing")
+        w = read_wand(wand)
+        result = calibrate_wand(read_detections(detections), w, read_rig(intrinsics),
+                                lframe=read_detections(lframe) if lframe is not None else None,
+                                refine_intrinsics=refine_intrinsics or "fixed", source=str(detections),
+                                lframe_source=None if lframe is None else str(lframe))
+    summary = result.to_dict()
+    summary["inputs"] = {k: str(v) for k, v in (("board", board), ("wand", wand), ("detections", detections),
+                                                ("intrinsics", intrinsics), ("lframe", lframe)) if v is not None}
+    summary["files"] = files
+    write_rig(out / "rig.toml", result.rig)
+    full = dict(summary)
+    full["parameter_names"] = [f"{c}:{n}" for c, n in result.parameter_names]
+    full["covariance"] = result.covariance
+    write_json(out / "calibrate_rig.json", full)
     return summary

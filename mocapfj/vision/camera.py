@@ -30,6 +30,7 @@ __all__ = [
     "in_image",
     "camera_centre_world",
     "look_at_camera",
+    "tilt_matrix",
 ]
 
 DIST_LENGTHS = (0, 4, 5, 8, 12, 14)
@@ -49,7 +50,7 @@ def _check_camera(camera: Camera) -> np.ndarray:
     return out
 
 
-def _tilt_matrix(tau_x: float, tau_y: float) -> np.ndarray:
+def tilt_matrix(tau_x: float, tau_y: float) -> np.ndarray:
     """OpenCV's ``computeTiltProjectionMatrix`` (Scheimpflug sensor tilt), (3, 3)."""
     cx, sx, cy, sy = np.cos(tau_x), np.sin(tau_x), np.cos(tau_y), np.sin(tau_y)
     rot_x = np.array([[1.0, 0.0, 0.0], [0.0, cx, sx], [0.0, -sx, cx]])
@@ -99,7 +100,7 @@ def project_points(camera: Camera, p_world) -> tuple[np.ndarray, np.ndarray]:
     xd = x * radial + 2.0 * p1 * xy + p2 * (r2 + 2.0 * x * x) + s1 * r2 + s2 * r4
     yd = y * radial + p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * xy + s3 * r2 + s4 * r4
     if tau_x != 0.0 or tau_y != 0.0:
-        m = _tilt_matrix(tau_x, tau_y)
+        m = tilt_matrix(tau_x, tau_y)
         w = m[2, 0] * xd + m[2, 1] * yd + m[2, 2]
         xd, yd = ((m[0, 0] * xd + m[0, 1] * yd + m[0, 2]) / w,
                   (m[1, 0] * xd + m[1, 1] * yd + m[1, 2]) / w)

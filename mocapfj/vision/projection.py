@@ -279,7 +279,7 @@ def normalized_from_pixels(camera: Camera, xy_px, *, iterations: int = 20, tol: 
     (..., 2) float
         Normalised coordinates in the camera frame.
     """
-    from .camera import _tilt_matrix
+    from .camera import tilt_matrix
 
     xy = np.asarray(xy_px, dtype=np.float64)
     if xy.ndim < 1 or xy.shape[-1] != 2:
@@ -291,7 +291,7 @@ def normalized_from_pixels(camera: Camera, xy_px, *, iterations: int = 20, tol: 
     K = camera.K
     target = np.stack([(xy[:, 0] - K[0, 2]) / K[0, 0], (xy[:, 1] - K[1, 2]) / K[1, 1]], axis=1)
     if d[12] != 0.0 or d[13] != 0.0:
-        Minv = np.linalg.inv(_tilt_matrix(d[12], d[13]))
+        Minv = np.linalg.inv(tilt_matrix(d[12], d[13]))
         h = np.column_stack([target, np.ones(len(target))]) @ Minv.T
         target = h[:, :2] / h[:, 2:3]
     x = target.copy()

@@ -30,7 +30,7 @@ from .posegraph import average_rotations, average_translations, chordal_mean, co
 from .projection import INTRINSIC_NAMES, camera_parameters, rotation_jacobian
 
 __all__ = ["RigCalibration", "CameraSummary", "calibrate_rig", "intrinsic_mask", "board_corner_table", "symmetry_maps",
-           "summarize_cameras", "camera_position_std"]
+           "summarize_cameras", "camera_position_std", "camera_dict", "check_detections", "rig_metadata"]
 
 DEFAULT_INTRINSICS = ("fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2")
 """Intrinsics refined by default (k3 is held: with k2 it trades off unless views fill the image corners)."""
@@ -143,7 +143,7 @@ class RigCalibration:
         cams = []
         for cam, s in zip(self.rig.cameras, self.cameras):
             d = s.to_dict()
-            d.update(_camera_dict(cam))
+            d.update(camera_dict(cam))
             cams.append(d)
         return {"method": "board", "gauge": self.gauge, "n_frames": self.n_frames, "sigma_px": self.sigma_px,
                 "rms_px": self.rms_px, "initial_rms_px": self.initial_rms_px,
@@ -152,7 +152,8 @@ class RigCalibration:
                 "dropped_views": [dict(v) for v in self.dropped_views], "cameras": cams}
 
 
-def _camera_dict(cam: Camera) -> dict:
+def camera_dict(cam: Camera) -> dict:
+    """A camera's intrinsics and pose for a JSON summary (rotation vector, rad; translation, m)."""
     return {"size": list(cam.size), "fx": float(cam.K[0, 0]), "fy": float(cam.K[1, 1]), "cx": float(cam.K[0, 2]),
             "cy": float(cam.K[1, 2]), "dist": cam.dist.tolist(), "rotation": rotvec_from_matrix(cam.R_cam_world).tolist(),
             "translation_m": cam.t_cam_world.tolist()}
@@ -272,7 +273,8 @@ def _resolve_symmetry(pose: dict, maps, p_of, cams, max_pnp_rms_px: float) -> di
     return out
 
 
-def _check_detections(det: Detections, n_cameras: int | None, where: str) -> None:
+def check_detections(det: Detections, n_cameras: int | None, where: str) -> None:
+    """Refuse non-finite pixels (naming the row) and camera numbers beyond the rig's."""
     bad = ~np.isfinite(det.xy_px).all(axis=1)
     if bad.any():
         k = int(np.flatnonzero(bad)[0])
@@ -364,7 +366,7 @@ def calibrate_rig(detections: Detections, board: Board, cameras: Rig | Sequence[
             raise InputError(None, "image_sizes", "the image size of every camera (or starting intrinsics)", None)
         n_cam = len(image_sizes)
         cams0 = None
-    _check_detections(detections, n_cam, where)
+    check_detections(detections, n_cam, where)
     names = list(names) if names is not None else ([c.name for c in cams0] if cams0 else
                                                     [f"cam_{c}" for c in range(n_cam)])
     ids_all, p_all = board_corner_table(board)

@@ -103,12 +103,12 @@ class WandCalibration:
 
     def to_dict(self) -> dict:
         """Machine-readable summary (the CLI's --json)."""
-        from .rig import _camera_dict
+        from .rig import camera_dict
 
         cams = []
         for cam, s in zip(self.rig.cameras, self.cameras):
             d = s.to_dict()
-            d.update(_camera_dict(cam))
+            d.update(camera_dict(cam))
             cams.append(d)
         return {"method": "wand", "world": self.world, "sigma_px": self.sigma_px, "rms_px": self.rms_px,
                 "initial_rms_px": self.initial_rms_px, "wand_length_mm": self.wand_length_mm,
@@ -372,9 +372,9 @@ def _kabsch(p: np.ndarray, q: np.ndarray) -> tuple[np.ndarray, np.ndarray, float
 
 
 def _check(det: Detections, n_cameras: int, where: str) -> None:
-    from .rig import _check_detections
+    from .rig import check_detections
 
-    _check_detections(det, n_cameras, where)
+    check_detections(det, n_cameras, where)
 
 
 def calibrate_wand(detections: Detections, wand: Wand, intrinsics: Rig | Sequence[Camera], *,

@@ -37,7 +37,7 @@ def relative(cams):
 def eight():
     rng = np.random.default_rng(300)
     rig = ring_rig(8, rng=rng)
-    wave = wand_wave(rig, WAND, 600, rng, noise_px=0.2)
+    wave = wand_wave(rig, WAND, 400, rng, noise_px=0.2)
     lf = lframe_detections(rig, WAND, 10, rng, noise_px=0.2)
     return rig, wave, lf, calibrate_wand(wave.detections, WAND, intrinsics_of(rig), lframe=lf)
 
@@ -46,7 +46,7 @@ def test_eight_cameras_wand_length_sd_below_half_a_millimetre(eight):
     rig, wave, _, res = eight
     assert res.wand_length_sd_mm < 0.5
     assert abs(res.wand_length_mean_mm - 500.0) < 0.1
-    assert res.n_wand_lengths > 500 and 0.18 < res.sigma_px < 0.22
+    assert res.n_wand_lengths > 350 and 0.18 < res.sigma_px < 0.22
     assert all(s.rms_px < 0.25 and s.extra["rms_mm"] < 1.0 for s in res.cameras)
 
 
@@ -68,13 +68,13 @@ def test_poses_within_their_sds_in_the_gauge_of_camera_0(eight):
 def test_lframe_puts_the_rig_in_its_world(eight):
     """The L-frame (unlabelled blobs, matched by epipolar geometry and its shape) stands at its
     nominal place in the simulated world: camera centres land within 3 mm and orientations within
-    0.03 deg of the truth (the L-frame's own triangulation error, about 0.1 mm over its 0.45 m arm,
+    0.06 deg of the truth (the L-frame's own triangulation error, about 0.1 mm over its 0.3-0.45 m arms,
     dominates)."""
     rig, _, _, res = eight
     assert res.world == "lframe" and res.lframe_rms_mm < 0.5
     for a, b in zip(rig.cameras, res.rig.cameras):
         assert np.linalg.norm(camera_centre_world(a) - camera_centre_world(b)) < 0.003
-        assert np.degrees(np.linalg.norm(rotvec_from_matrix(b.R_cam_world @ a.R_cam_world.T))) < 0.03
+        assert np.degrees(np.linalg.norm(rotvec_from_matrix(b.R_cam_world @ a.R_cam_world.T))) < 0.06
     assert res.rig.metadata["method"] == "wand" and res.rig.metadata["units"] == "m"
 
 

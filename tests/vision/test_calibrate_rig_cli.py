@@ -1,0 +1,117 @@
+"""``mocapfj calibrate-rig`` through the command line (subprocess): board views, a wand wave, bad input."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from mocapfj.io import read_rig, write_detections, write_rig
+from mocapfj.io.calib import read_wand
+from mocapfj.synth.cameras import ring_rig
+from mocapfj.synth.wand import lframe_detections, wand_wave
+from mocapfj.types import Camera, Detections, Rig
+
+ROOT = Path(__file__).resolve().parents[2]
+WAND_FILE = ROOT / "calibration" / "wands" / "wand_3marker_500mm.toml"
+
+
+def run(*args):
+    return subprocess.run([sys.executable, "-m", "mocapfj.cli", "calibrate-rig", *map(str, args)],
+                          capture_output=True, text=True, cwd=ROOT)
+
+
+@pytest.fixture(scope="module")
+def wand_files(tmp_path_factory):
+    d = tmp_path_factory.mktemp("wand")
+    rng = np.random.default_rng(77)
+    rig = ring_rig(4, rng=rng)
+    wand = read_wand(WAND_FILE)
+    write_detections(d / "blobs.csv", wand_wave(rig, wand, 300, rng, noise_px=0.2).detections)
+    write_detections(d / "lframe.csv", lframe_detections(rig, wand, 5, rng, noise_px=0.2))
+    write_rig(d / "intrinsics.toml", Rig(tuple(Camera(c.name, c.size, c.K, c.dist, np.eye(3), np.zeros(3))
+                                               for c in rig.cameras)))
+    return d, rig
+
+
+def test_wand_wave_to_rig_file_and_json(wand_files, tmp_path):
+    d, rig = wand_files
+    out = tmp_path / "out"
+    r = run("--wand", WAND_FILE, "--detections", d / "blobs.csv", "--lframe", d / "lframe.csv",
+            "--intrinsics", d / "intrinsics.toml", "--out", out, "--json")
+    assert r.returncode == 0, r.stderr
+    s = json.loads(r.stdout)
+    assert s["method"] == "wand" and s["world"] == "lframe" and s["wand_length_sd_mm"] < 0.8
+    assert abs(s["wand_length_mean_mm"] - 500.0) < 0.2
+    assert [c["name"] for c in s["cameras"]] == [f"cam_{i}" for i in range(4)]
+    for c in s["cameras"]:
+        assert c["rms_px"] < 0.3 and c["rms_mm"] < 1.5 and set(c["std"]) >= {"rx", "tx"} or c["name"] == "cam_0"
+        assert len(c["position_std_m"]) == 3 and len(c["rotation_std_deg"]) == 3
+    back = read_rig(out / "rig.toml")
+    for a, b in zip(rig.cameras, back.cameras):
+        assert np.linalg.norm(a.R_cam_world.T @ a.t_cam_world - b.R_cam_world.T @ b.t_cam_world) < 0.01
+    full = json.loads((out / "calibrate_rig.json").read_text())
+    P = np.array(full["covariance"])
+    assert P.shape == (len(full["parameter_names"]),) * 2 and np.allclose(P, P.T)
+
+
+def test_board_views_of_bouguets_stereo_pair(realdata, tmp_path):
+    """Five of Bouguet's left/right pairs through the command line (the 14 pairs' acceptance check
+    is in test_rig.py): the baseline within 1 mm of his 99.80 mm and the relative rotation within
+    0.2 deg of om = [0.00669, 0.00452, -0.00350] rad."""
+    images = realdata / "bouguet_stereo" / "images"
+    left = [images / f"left{k:02d}.jpg" for k in (1, 3, 6, 9, 12)]
+    right = [images / f"right{k:02d}.jpg" for k in (1, 3, 6, 9, 12)]
+    r = run("--board", ROOT / "calibration" / "boards" / "chessboard_9x6_30mm.toml", "--camera", *left,
+            "--camera", *right, "--out", tmp_path / "stereo", "--json")
+    assert r.returncode == 0, r.stderr
+    s = json.loads(r.stdout)
+    assert s["method"] == "board" and s["rms_px"] < 0.2
+    right_cam = read_rig(tmp_path / "stereo" / "rig.toml").cameras[1]
+    assert abs(np.linalg.norm(right_cam.t_cam_world) * 1000 - 99.80) < 1.0
+    dR = Rotation.from_matrix(right_cam.R_cam_world) * Rotation.from_rotvec([0.00669, 0.00452, -0.00350]).inv()
+    assert np.degrees(dR.magnitude()) < 0.2
+    assert (tmp_path / "stereo" / "detections.csv").is_file()
+
+
+def test_bad_input_exits_2_with_one_line_and_writes_nothing(wand_files, tmp_path):
+    d, _ = wand_files
+    text = (d / "blobs.csv").read_text().splitlines()
+    head, first = text[0], text[1].split(",")
+    cols = head.split(",")
+    first[cols.index("x_px")] = "nan"
+    (tmp_path / "nan.csv").write_text("\n".join([head, ",".join(first)] + text[2:]) + "\n")
+    many = [head] + [line for line in text[1:]] + [",".join(["0", "9", "100.0", "100.0"] + ([] if len(cols) == 4 else ["-1"]))]
+    (tmp_path / "nine.csv").write_text("\n".join(many) + "\n")
+    cases = [
+        (("--wand", WAND_FILE, "--detections", tmp_path / "nan.csv", "--intrinsics", d / "intrinsics.toml"),
+         r"nan\.csv: row 0 \(frame 0, camera \d\) x_px/y_px: expected finite pixel coordinates"),
+        (("--wand", WAND_FILE, "--detections", tmp_path / "nine.csv", "--intrinsics", d / "intrinsics.toml"),
+         r"nine\.csv: camera: expected camera numbers below 4 \(the rig has 4 cameras\), got camera 9"),
+        (("--wand", WAND_FILE, "--board", ROOT / "calibration" / "boards" / "chessboard_9x6_30mm.toml"),
+         r"--board/--wand: expected exactly one of --board"),
+    ]
+    for args, pattern in cases:
+        out = tmp_path / "never"
+        r = run(*args, "--out", out)
+        assert r.returncode == 2, (args, r.stderr)
+        lines = r.stderr.strip().splitlines()
+        assert len(lines) == 1 and lines[0].startswith("mocapfj: error: "), r.stderr
+        import re
+
+        assert re.search(pattern, lines[0]), lines[0]
+        assert not out.exists()
+
+
+def test_one_board_view_per_camera_is_refused(realdata, tmp_path):
+    images = realdata / "bouguet_stereo" / "images"
+    r = run("--board", ROOT / "calibration" / "boards" / "chessboard_9x6_30mm.toml", "--camera", images / "left01.jpg",
+            "--camera", images / "right01.jpg", "--out", tmp_path / "one")
+    assert r.returncode == 2
+    assert "camera 0 (cam_0): expected at least 3 board views to estimate its intrinsics, got 1 view" in r.stderr
+    assert not (tmp_path / "one").exists()
