@@ -133,7 +133,7 @@ class _Problem:
         self.nc = int(free.sum())
         self.names = tuple((c, (POSE_NAMES + INTRINSIC_NAMES)[q]) for c in range(C) for q in range(15) if free[c, q])
         self.x0 = np.concatenate([self._cam_vector(rvecs, tvecs, intr)[free], groups.ravel()])
-        self._cache = (None, None)
+        self._pattern = (None, None)
 
     def _cam_vector(self, r, t, i):
         return np.concatenate([r, t, i], axis=1)
@@ -149,7 +149,8 @@ class _Problem:
             return groups[g]
         if self.kind == "rigid":
             R, _ = rotation_jacobian(groups[:, :3])
-            return np.einsum("nij,nj->ni", R[g], self.local[rows]) + groups[g, 3:]
+            b = self.local[rows]
+            return (R[g] @ b[:, :, None])[:, :, 0] + groups[g, 3:]
         return wand_points(groups, self.basis, self.local[rows, 0], g)
 
     def project(self, x, rows, jac):
@@ -165,16 +166,20 @@ class _Problem:
         pj, groups = self.project(x, rows, True)
         g = self.group[rows]
         dp = pj.d_point
+        n = len(rows)
+        block = np.empty((n, 2, 15 + self.k))
+        block[:, :, :6] = pj.d_pose
+        block[:, :, 6:15] = pj.d_intrinsics
+        ds = block[:, :, 15:]
         if self.kind == "point":
-            ds = dp
+            ds[...] = dp
         elif self.kind == "rigid":
+            # dp/dw = -R [b]x M = -[R b]x (R M); a^T [v]x = (a x v)^T
             R, M = rotation_jacobian(groups[:, :3])
-            b = self.local[rows]
-            skew_b = np.zeros((len(b), 3, 3))
-            skew_b[:, 0, 1], skew_b[:, 0, 2], skew_b[:, 1, 2] = -b[:, 2], b[:, 1], -b[:, 0]
-            skew_b[:, 1, 0], skew_b[:, 2, 0], skew_b[:, 2, 1] = b[:, 2], -b[:, 1], b[:, 0]
-            dpw = -np.einsum("nij,njk,nkl->nil", R[g], skew_b, M[g])
-            ds = np.concatenate([np.einsum("nij,njk->nik", dp, dpw), dp], axis=2)
+            RM = R @ M
+            Rb = (R[g] @ self.local[rows][:, :, None])[:, :, 0]
+            ds[:, :, :3] = -(np.cross(dp, Rb[:, None, :]) @ RM[g])
+            ds[:, :, 3:] = dp
         else:
             B = self.basis
             v = B[:, 0] + groups[:, 3:4] * B[:, 1] + groups[:, 4:5] * B[:, 2]
@@ -183,23 +188,34 @@ class _Problem:
             P = (np.eye(3) - np.einsum("gi,gj->gij", u, u)) / nv[:, None, None]
             s = self.local[rows, 0]
             du = np.stack([np.einsum("gij,gj->gi", P, B[:, 1]), np.einsum("gij,gj->gi", P, B[:, 2])], axis=2)  # (G,3,2)
-            ds = np.concatenate([dp, np.einsum("nij,njk->nik", dp, du[g]) * s[:, None, None]], axis=2)
-        block = np.concatenate([pj.d_pose, pj.d_intrinsics, ds], axis=2)        # (n, 2, 15 + k)
-        col = np.concatenate([self.cam_cols[self.camera[rows]],
-                              self.nc + g[:, None] * self.k + np.arange(self.k)], axis=1)
+            ds[:, :, :3] = dp
+            ds[:, :, 3:] = (dp @ du[g]) * s[:, None, None]
+        flat, indices, indptr = self._sparsity(rows)
+        return sp.csr_matrix((block.reshape(-1)[flat], indices, indptr), shape=(2 * n, self.nc + self.G * self.k))
+
+    def _sparsity(self, rows):
+        """Which entries of the dense (n, 2, 15 + k) block are Jacobian entries, and the CSR pattern
+        (kept while the rows stay the same: every solve of one pass)."""
+        last, pattern = self._pattern
+        if last is not None and last.shape == rows.shape and np.array_equal(last, rows):
+            return pattern
+        g = self.group[rows]
+        col = np.concatenate([self.cam_cols[self.camera[rows]], self.nc + g[:, None] * self.k + np.arange(self.k)],
+                             axis=1)
         valid = col >= 0
-        n = len(rows)
-        per_row = valid.sum(axis=1)
-        indptr = np.concatenate([[0], np.cumsum(np.repeat(per_row, 2))])
-        mask = np.broadcast_to(valid[:, None, :], block.shape)
-        indices = np.broadcast_to(col[:, None, :], block.shape)[mask]
-        return sp.csr_matrix((block[mask], indices, indptr), shape=(2 * n, self.nc + self.G * self.k))
+        mask = np.broadcast_to(valid[:, None, :], (len(rows), 2, col.shape[1]))
+        flat = np.flatnonzero(mask.reshape(-1))
+        indices = np.broadcast_to(col[:, None, :], mask.shape)[mask]
+        indptr = np.concatenate([[0], np.cumsum(np.repeat(valid.sum(axis=1), 2))])
+        pattern = (flat, indices.astype(np.int32), indptr.astype(np.int32))
+        self._pattern = (rows.copy(), pattern)
+        return pattern
 
     def solve(self, x0, rows, loss, f_scale, max_nfev, rounds: int = 60):
         """least_squares in whitened variables z, x = x_k + T_k z, T_k from :func:`_whitening` at x_k.
 
-        A round ends when least_squares converges; the next round whitens again at its solution
-        (from a poor start the first whitening no longer fits the solution's Jacobian, and LSMR
+        A round ends when least_squares converges or after 8 evaluations; the next round whitens again
+        at its solution (from a poor start the first whitening no longer fits the solution's Jacobian, and LSMR
         slows down); the rounds stop when one lowers the cost by less than 1e-10 of itself."""
         x = x0
         nfev = 0
@@ -237,8 +253,8 @@ class _Problem:
         # the trust region starts as large as any Gauss-Newton step can be (|J T dz| = |dz| <= |r|)
         scale = max(float(np.linalg.norm(fun(z0))), 1.0)
         res = least_squares(fun, z0, jac=jac, method="trf", tr_solver="lsmr", loss=loss, f_scale=f_scale,
-                            x_scale=scale, max_nfev=max_nfev or 12, ftol=1e-10, xtol=1e-10, gtol=1e-10,
-                            tr_options={"regularize": False, "atol": 1e-8, "btol": 1e-8})
+                            x_scale=scale, max_nfev=max_nfev or 8, ftol=1e-10, xtol=1e-10, gtol=1e-10,
+                            tr_options={"regularize": False, "atol": 1e-6, "btol": 1e-6})
         res.x = x0 + T @ res.x
         return res
 
@@ -333,9 +349,13 @@ def bundle_adjust(kind: str, camera, group, local, xy_px, rvecs, tvecs, intrinsi
     if kind not in _K:
         raise InputError(None, "kind", f"one of {list(_K)}", kind)
     camera = np.asarray(camera, dtype=np.intp)
-    group = np.asarray(group, dtype=np.intp)
-    xy = np.asarray(xy_px, dtype=np.float64)
-    local = np.zeros((len(camera), 3)) if local is None else np.asarray(local, dtype=np.float64)
+    order = np.argsort(camera, kind="stable")          # by camera: projection works on slices
+    back = np.empty_like(order)
+    back[order] = np.arange(order.size)
+    camera = camera[order]
+    group = np.asarray(group, dtype=np.intp)[order]
+    xy = np.asarray(xy_px, dtype=np.float64)[order]
+    local = np.zeros((len(camera), 3)) if local is None else np.asarray(local, dtype=np.float64)[order]
     prob = _Problem(kind, camera, group, local, xy, np.asarray(rvecs, float), np.asarray(tvecs, float),
                     np.asarray(intrinsics, float), np.asarray(extra, float), np.asarray(groups, float),
                     np.asarray(pose_free, bool), np.asarray(intr_free, bool), basis)
@@ -369,7 +389,7 @@ def bundle_adjust(kind: str, camera, group, local, xy_px, rvecs, tvecs, intrinsi
     # groups that lost every observation have zero blocks: pinv leaves them out
     cov = _camera_covariance(J, prob.nc, prob.k, sigma)
     rv, tv, iv, gr = prob.unpack(res.x)
-    return BundleResult(rvecs=rv, tvecs=tv, intrinsics=iv, groups=gr, residual_px=r, inlier=inlier, sigma_px=sigma,
-                        covariance=cov, names=prob.names, n_parameters=n_par, nfev=nfev,
+    return BundleResult(rvecs=rv, tvecs=tv, intrinsics=iv, groups=gr, residual_px=r[back], inlier=inlier[back],
+                        sigma_px=sigma, covariance=cov, names=prob.names, n_parameters=n_par, nfev=nfev,
                         initial_rms_px=initial_rms, rms_px=float(np.sqrt(np.mean(r[rows] ** 2))),
-                        points_world=prob.points(gr, np.arange(len(camera))))
+                        points_world=prob.points(gr, np.arange(len(camera)))[back])

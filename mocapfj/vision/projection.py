@@ -201,44 +201,76 @@ def project_batch(rvecs, tvecs, intrinsics, extra, camera_index, p_world, *,
     ci = np.asarray(camera_index, dtype=np.intp)
     p = np.asarray(p_world, dtype=np.float64)
     R, M = rotation_jacobian(rvecs)
-    Rn = R[ci]
-    pc = np.einsum("nij,nj->ni", Rn, p) + tvecs[ci]
+    RM = R @ M
+    n = p.shape[0]
+    uv = np.empty((n, 2))
+    z = np.empty(n)
+    if jacobians:
+        d_point = np.empty((n, 2, 3))
+        d_pose = np.empty((n, 2, 6))
+        d_in = np.empty((n, 2, 9))
+    # per camera (few cameras, many points): scalar coefficients and 3 x 3 matrix products; points
+    # sorted by camera (as bundle adjustment passes them) are taken as slices
+    ordered = R.shape[0] == 1 or bool(np.all(ci[1:] >= ci[:-1]))
+    bounds = np.searchsorted(ci, np.arange(R.shape[0] + 1)) if ordered and R.shape[0] > 1 else None
+    for c in range(R.shape[0]):
+        if R.shape[0] == 1:
+            idx = slice(None)
+        elif bounds is not None:
+            idx = slice(int(bounds[c]), int(bounds[c + 1]))
+        else:
+            idx = np.flatnonzero(ci == c)
+        if isinstance(idx, np.ndarray) and not idx.size or isinstance(idx, slice) and idx.start == idx.stop is not None:
+            continue
+        out = _project_one(R[c], RM[c], tvecs[c], intr[c], ext[c], p[idx], jacobians)
+        uv[idx], z[idx] = out[0], out[1]
+        if jacobians:
+            d_point[idx], d_pose[idx], d_in[idx] = out[2:]
+    if not jacobians:
+        return ProjectionJacobians(uv, None, None, None, z)
+    return ProjectionJacobians(uv, d_point, d_pose, d_in, z)
+
+
+def _project_one(R, RM, t, intr, extra, p, jacobians):
+    """One camera's share of :func:`project_batch`: (uv, z[, d_point, d_pose, d_intrinsics])."""
+    n = p.shape[0]
+    w = p @ R.T                                             # R p
+    pc = w + t
     z = pc[:, 2]
     in_front = z > 0.0
     zs = np.where(in_front, z, 1.0)
     xy = pc[:, :2] / zs[:, None]
-    I = intr[ci]
-    d14 = np.concatenate([I[:, 4:9], ext[ci]], axis=1)
+    d14 = np.concatenate([intr[4:9], extra])
     xyd, Jd = distort(xy, d14)
-    f = I[:, 0:2]
-    uv = f * xyd + I[:, 2:4]
+    fx, fy = intr[0], intr[1]
+    uv = xyd * (fx, fy) + intr[2:4]
     uv[~in_front] = np.nan
     if not jacobians:
-        return ProjectionJacobians(uv, None, None, None, z)
-    # d uv / d p_cam = diag(f) Jd d(x, y)/d p_cam
+        return uv, z
+    # d uv / d p_cam = diag(f) Jd d(x, y)/d p_cam, d(x, y)/d p_cam = [[1, 0, -x], [0, 1, -y]] / z
     inv_z = 1.0 / zs
-    dxy_dpc = np.zeros((p.shape[0], 2, 3))
-    dxy_dpc[:, 0, 0] = inv_z
-    dxy_dpc[:, 1, 1] = inv_z
-    dxy_dpc[:, :, 2] = -xy * inv_z[:, None]
-    duv_dpc = f[:, :, None] * np.einsum("nij,njk->nik", Jd, dxy_dpc)
-    d_point = np.einsum("nik,nkj->nij", duv_dpc, Rn)
-    # d p_cam / d r = -R [p]x M
-    dpc_dr = -np.einsum("nij,njk,nkl->nil", Rn, _skew(p), M[ci])
-    d_pose = np.concatenate([np.einsum("nik,nkj->nij", duv_dpc, dpc_dr), duv_dpc], axis=2)
+    duv_dpc = np.empty((n, 2, 3))
+    duv_dpc[:, 0, :2] = Jd[:, 0] * (fx * inv_z)[:, None]
+    duv_dpc[:, 1, :2] = Jd[:, 1] * (fy * inv_z)[:, None]
+    duv_dpc[:, :, 2] = -(duv_dpc[:, :, 0] * xy[:, 0:1] + duv_dpc[:, :, 1] * xy[:, 1:2])
+    d_point = (duv_dpc.reshape(-1, 3) @ R).reshape(n, 2, 3)        # 2-D products: far faster than batched
+    # d p_cam / d r = -R [p]x M = -[R p]x (R M); a^T [w]x = (a x w)^T
+    d_pose = np.empty((n, 2, 6))
+    d_pose[:, :, :3] = -(np.cross(duv_dpc, w[:, None, :]).reshape(-1, 3) @ RM).reshape(n, 2, 3)
+    d_pose[:, :, 3:] = duv_dpc
     x, y = xy[:, 0], xy[:, 1]
     r2 = x * x + y * y
-    b = 1.0 + r2 * (d14[:, 5] + r2 * (d14[:, 6] + r2 * d14[:, 7]))
-    fx, fy = f[:, 0], f[:, 1]
-    d_in = np.zeros((p.shape[0], 2, 9))
+    b = 1.0 + r2 * (d14[5] + r2 * (d14[6] + r2 * d14[7]))
+    d_in = np.zeros((n, 2, 9))
     d_in[:, 0, 0] = xyd[:, 0]
     d_in[:, 1, 1] = xyd[:, 1]
     d_in[:, 0, 2] = 1.0
     d_in[:, 1, 3] = 1.0
-    for col, power in ((4, 1), (5, 2), (8, 3)):             # k1, k2, k3
-        g = r2**power / b
+    g = r2 / b
+    for col in (4, 5, 8):                                    # k1, k2, k3: r2, r2^2, r2^3
         d_in[:, 0, col] = fx * x * g
         d_in[:, 1, col] = fy * y * g
+        g = g * r2 if col != 5 else g * r2
     d_in[:, 0, 6] = fx * 2.0 * x * y                          # p1
     d_in[:, 1, 6] = fy * (r2 + 2.0 * y * y)
     d_in[:, 0, 7] = fx * (r2 + 2.0 * x * x)                   # p2
@@ -247,7 +279,7 @@ def project_batch(rvecs, tvecs, intrinsics, extra, camera_index, p_world, *,
     if bad.any():
         for a in (d_point, d_pose, d_in):
             a[bad] = np.nan
-    return ProjectionJacobians(uv, d_point, d_pose, d_in, z)
+    return uv, z, d_point, d_pose, d_in
 
 
 def project_jacobians(camera: Camera, p_world) -> ProjectionJacobians:
