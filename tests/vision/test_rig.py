@@ -203,6 +203,18 @@ def test_bad_input_is_named():
         calibrate_rig(det, BOARD, unposed(rig), intrinsics="some")
 
 
+def test_a_nan_calibration_is_never_written(tmp_path):
+    """Cameras cannot hold NaN (the type refuses it) and the rig writer refuses NaN in [metadata]."""
+    from mocapfj.io import write_rig
+
+    cam = unposed(ring_rig(2)).cameras[0]
+    with pytest.raises(InputError, match="K"):
+        Camera("c", (640, 480), np.full((3, 3), np.nan), [], np.eye(3), np.zeros(3))
+    with pytest.raises(InputError, match=r"metadata\.cameras\[1\]\.rms_px: expected a finite number"):
+        write_rig(tmp_path / "r.toml", Rig((cam, cam), {"cameras": [{"rms_px": 0.2}, {"rms_px": float("nan")}]}))
+    assert not (tmp_path / "r.toml").exists()
+
+
 def _stereo_detections(images):
     """Bouguet's chessboards: OpenCV's classic detector with cornerSubPix (11 x 11 window)."""
     rows = []

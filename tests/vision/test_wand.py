@@ -92,8 +92,8 @@ def test_blob_labels_match_the_truth():
 
 def test_labelled_input_and_refined_intrinsics_and_determinism():
     rng = np.random.default_rng(21)
-    rig = ring_rig(5, rng=rng)
-    wave = wand_wave(rig, WAND, 300, rng, noise_px=0.2, labelled=True)
+    rig = ring_rig(4, rng=rng)
+    wave = wand_wave(rig, WAND, 250, rng, noise_px=0.2, labelled=True)
     a = calibrate_wand(wave.detections, WAND, intrinsics_of(rig), refine_intrinsics="default")
     assert a.labelled and a.world == "camera 0" and a.wand_length_sd_mm < 0.6
     assert "fx" in a.cameras[3].std
