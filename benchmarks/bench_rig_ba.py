@@ -44,7 +44,7 @@ from mocapfj.types import Board, Camera  # noqa: E402
 from mocapfj.vision.bundle import bundle_adjust  # noqa: E402
 from mocapfj.vision.projection import camera_parameters  # noqa: E402
 from mocapfj.vision.rig import board_corner_table  # noqa: E402
-from mocapfj.vision.wand import triangulate  # noqa: E402
+from mocapfj.vision.multiview import triangulate  # noqa: E402
 
 BOARD = Board("charuco", 7, 5, square_m=0.06, marker_m=0.042, dictionary="DICT_5X5_100")
 CASES = [(4, 40), (6, 80), (8, 150)]

@@ -21,9 +21,9 @@ come from the wand:
 5. **Check.** Each marker is triangulated again without the constraint, frame by frame; the
    spread of the first-to-last distance (wand length mean and SD, mm) is the calibration's
    accuracy check that commercial systems report.
-6. **L-frame.** Its markers (labelled, or matched by epipolar geometry and their known shape) are
-   triangulated and the rigid transform onto their nominal positions (Kabsch 1976) moves the rig
-   into the L-frame's world.
+6. **L-frame** (:mod:`mocapfj.vision.multiview`). Its markers (labelled, or matched across
+   cameras and by their known shape) are triangulated, and the rigid transform onto their nominal
+   positions (Kabsch 1976) moves the rig into the L-frame's world.
 
 Standard deviations are those of the bundle adjustment, in the gauge of camera 0 (positions
 along the world's axes); the L-frame's own uncertainty is not in them.
@@ -33,20 +33,20 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
-from itertools import permutations
 
 import cv2
 import numpy as np
 
 from ..errors import InputError
-from ..rotations import matrix_from_rotvec, rotvec_from_matrix
+from ..rotations import matrix_from_rotvec
 from ..types import Camera, Detections, Rig, Wand
 from .bundle import bundle_adjust, wand_basis
+from .multiview import lframe_pose, normalized_points, triangulate
 from .posegraph import average_rotations, average_translations, components
-from .projection import camera_parameters, normalized_from_pixels, project_batch
+from .projection import camera_parameters, project_batch
 from .rig import CameraSummary, intrinsic_mask, rig_metadata, summarize_cameras
 
-__all__ = ["WandCalibration", "calibrate_wand", "label_wand_blobs", "triangulate", "lframe_pose"]
+__all__ = ["WandCalibration", "calibrate_wand", "label_wand_blobs"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -119,15 +119,6 @@ class WandCalibration:
                 "refined_intrinsics": list(self.refined_intrinsics), "nfev": self.nfev, "cameras": cams}
 
 
-def _normalized(cams: Sequence[Camera], camera: np.ndarray, xy: np.ndarray) -> np.ndarray:
-    out = np.full(xy.shape, np.nan)
-    for c, cam in enumerate(cams):
-        sel = camera == c
-        if sel.any():
-            out[sel] = normalized_from_pixels(cam, xy[sel])
-    return out
-
-
 def label_wand_blobs(det: Detections, wand: Wand, cameras: Sequence[Camera], *,
                      line_tol_px: float = 2.5) -> tuple[Detections, int]:
     """Give unlabelled wand blobs their marker index (module docstring, step 1).
@@ -150,7 +141,7 @@ def label_wand_blobs(det: Detections, wand: Wand, cameras: Sequence[Camera], *,
     ok_g = count == K
     rows = (start[ok_g][:, None] + np.arange(K)).ravel()
     G = int(ok_g.sum())
-    n = _normalized(cameras, cam[rows], xy[rows]).reshape(G, K, 2)
+    n = normalized_points(cameras, cam[rows], xy[rows]).reshape(G, K, 2)
     f = np.array([cameras[int(c)].K[0, 0] for c in cam[rows][::K]]) if G else np.zeros(0)
     mean = n.mean(axis=1, keepdims=True)
     d = n - mean
@@ -176,61 +167,9 @@ def label_wand_blobs(det: Detections, wand: Wand, cameras: Sequence[Camera], *,
     return out, int(n_groups - good.sum())
 
 
-def triangulate(cameras: Sequence[Camera], camera, point, xy_px, n_points: int, *,
-                iterations: int = 3) -> tuple[np.ndarray, np.ndarray]:
-    """Points seen by several cameras: linear triangulation in normalised coordinates (DLT;
-    Hartley and Zisserman 2003, §12.2), then Gauss-Newton on the pixel reprojection error.
-
-    Parameters
-    ----------
-    cameras : sequence of Camera
-    camera, point : (N,) int
-        Camera and point index of each observation.
-    xy_px : (N, 2) float
-    n_points : int
-
-    Returns
-    -------
-    p_world : (n_points, 3)
-        NaN for points seen by fewer than two cameras.
-    n_views : (n_points,) int
-    """
-    camera = np.asarray(camera, dtype=np.intp)
-    point = np.asarray(point, dtype=np.intp)
-    xy_px = np.asarray(xy_px, dtype=np.float64)
-    nrm = _normalized(cameras, camera, xy_px)
-    ok = np.isfinite(nrm).all(axis=1)
-    camera, point, xy_px, nrm = camera[ok], point[ok], xy_px[ok], nrm[ok]
-    P = np.stack([np.hstack([c.R_cam_world, c.t_cam_world[:, None]]) for c in cameras])[camera]     # (N, 3, 4)
-    rows = np.concatenate([nrm[:, :1] * P[:, 2] - P[:, 0], nrm[:, 1:] * P[:, 2] - P[:, 1]], axis=1).reshape(-1, 2, 4)
-    A = np.zeros((n_points, 4, 4))
-    np.add.at(A, point, np.einsum("nri,nrj->nij", rows, rows))
-    n_views = np.bincount(point, minlength=n_points)
-    _, V = np.linalg.eigh(A)
-    h = V[:, :, 0]
-    with np.errstate(invalid="ignore", divide="ignore"):
-        p = h[:, :3] / h[:, 3:4]
-    p[n_views < 2] = np.nan
-    params = [camera_parameters(c) for c in cameras]
-    rv, tv, intr, extra = (np.stack([q[k] for q in params]) for k in range(4))
-    for _ in range(iterations):
-        pj = project_batch(rv, tv, intr, extra, camera, p[point])
-        r = pj.xy_px - xy_px
-        good = np.isfinite(r).all(axis=1)
-        H = np.zeros((n_points, 3, 3))
-        g = np.zeros((n_points, 3))
-        np.add.at(H, point[good], np.einsum("nki,nkj->nij", pj.d_point[good], pj.d_point[good]))
-        np.add.at(g, point[good], np.einsum("nki,nk->ni", pj.d_point[good], r[good]))
-        solvable = (n_views >= 2) & (np.linalg.det(H) > 0)
-        step = np.zeros((n_points, 3))
-        step[solvable] = np.linalg.solve(H[solvable], g[solvable][..., None])[..., 0]
-        p = p - step
-    return p, n_views
-
-
 def _pair_poses(cams, lab: Detections, K: int, wand: Wand, min_points: int):
     """Relative pose samples (i, j, R_ij, t_ij, weight) from the essential matrix of each camera pair."""
-    nrm = _normalized(cams, lab.camera, lab.xy_px)
+    nrm = normalized_points(cams, lab.camera, lab.xy_px)
     key = lab.frame.astype(np.int64) * K + lab.point_id
     out = []
     C = len(cams)
@@ -269,106 +208,6 @@ def _pair_poses(cams, lab: Detections, K: int, wand: Wand, min_points: int):
             scale = float(np.median(np.concatenate(ratios)))
             out.append((b, a, R, t.ravel() * scale, float(n_in)))
     return out
-
-
-def lframe_pose(cams: Sequence[Camera], det: Detections, wand: Wand, where: str = "L-frame detections"):
-    """Where the L-frame is in the rig's current frame: (R, t) with p_world = R p_rig + t, the
-    triangulated markers (L, 3) in the world, and the fit's RMS (m). Unlabelled blobs are matched
-    across cameras by epipolar geometry and labelled by the L-frame's known shape."""
-    L = wand.lframe_m
-    nL = L.shape[0]
-    C = len(cams)
-    _check(det, C, where)
-    # per camera: one still position per blob (median over frames)
-    blobs = {}
-    for c in range(C):
-        sel = det.camera == c
-        if not sel.any():
-            continue
-        xy, pid, fr = det.xy_px[sel], det.point_id[sel], det.frame[sel]
-        if (pid >= 0).any():
-            if (pid < 0).any() or pid.max() >= nL:
-                raise InputError(where, "point_id", f"L-frame marker indices 0..{nL - 1} on every row, or -1 on every row",
-                                 int(pid.max()))
-            pts = np.full((nL, 2), np.nan)
-            for k in np.unique(pid):
-                pts[k] = np.median(xy[pid == k], axis=0)
-            blobs[c] = pts
-        else:
-            counts = np.bincount(fr - fr.min())
-            ref_f = fr.min() + int(np.argmax(counts))
-            ref = xy[fr == ref_f]
-            if ref.shape[0] != nL:
-                continue
-            d = np.linalg.norm(xy[:, None, :] - ref[None], axis=2)
-            near = d.argmin(axis=1)
-            close = d.min(axis=1) < 3.0
-            blobs[c] = np.array([np.median(xy[close & (near == k)], axis=0) for k in range(nL)])
-    labelled = (det.point_id >= 0).any()
-    if not labelled:
-        full = [c for c in sorted(blobs) if np.isfinite(blobs[c]).all()]
-        if len(full) < 2:
-            raise InputError(where, "cameras", f"at least two cameras that see all {nL} L-frame markers",
-                             f"{len(full)} camera(s)")
-        # the pair with the widest angle between optical axes
-        best = max(((a, b) for i, a in enumerate(full) for b in full[i + 1:]),
-                   key=lambda ab: np.arccos(np.clip(cams[ab[0]].R_cam_world[2] @ cams[ab[1]].R_cam_world[2], -1, 1)))
-        a, b = best
-        na = normalized_from_pixels(cams[a], blobs[a])
-        nb = normalized_from_pixels(cams[b], blobs[b])
-        cand = []
-        for perm in permutations(range(nL)):
-            pts, _ = triangulate([cams[a], cams[b]], np.r_[np.zeros(nL, int), np.ones(nL, int)],
-                                 np.r_[np.arange(nL), np.array(perm)], np.r_[blobs[a], blobs[b]], nL)
-            for lab in permutations(range(nL)):
-                R, t, rms = _kabsch(pts, L[list(lab)])
-                cand.append((rms, perm, lab))
-        cand.sort(key=lambda x: x[0])
-        rms0, perm, lab = cand[0]
-        if len(cand) > 1 and cand[1][0] < 1.5 * rms0 + 1e-4 and (cand[1][2] != lab):
-            raise InputError(where, "L-frame", "markers whose layout fixes their labels (an asymmetric L-frame), "
-                             "or labelled detections (point_id)", "two labellings fit equally well")
-        # labels: blob k of camera a is L-frame marker lab[k]; camera b's blob perm[k] too
-        pts, _ = triangulate([cams[a], cams[b]], np.r_[np.zeros(nL, int), np.ones(nL, int)],
-                             np.r_[np.array(lab), np.array(lab)], np.r_[blobs[a], blobs[b][list(perm)]], nL)
-        del na, nb
-        # every camera's blobs matched to the projections of these points
-        cam_idx, pt_idx, xys = [], [], []
-        for c, pts2 in sorted(blobs.items()):
-            from .camera import project_points
-
-            proj, _ = project_points(cams[c], pts)
-            d = np.linalg.norm(pts2[:, None, :] - proj[None], axis=2)
-            for k in range(pts2.shape[0]):
-                j = int(np.argmin(d[k]))
-                if d[k, j] < 5.0 and np.argmin(d[:, j]) == k:
-                    cam_idx.append(c)
-                    pt_idx.append(j)
-                    xys.append(pts2[k])
-    else:
-        cam_idx, pt_idx, xys = [], [], []
-        for c, pts2 in sorted(blobs.items()):
-            for k in range(nL):
-                if np.isfinite(pts2[k]).all():
-                    cam_idx.append(c)
-                    pt_idx.append(k)
-                    xys.append(pts2[k])
-    p, nv = triangulate(cams, np.array(cam_idx), np.array(pt_idx), np.array(xys).reshape(-1, 2), nL)
-    if (nv < 2).any():
-        k = int(np.flatnonzero(nv < 2)[0])
-        raise InputError(where, f"L-frame marker {k}", "seen by at least two cameras", f"{int(nv[k])} camera(s)")
-    R, t, rms = _kabsch(p, L)
-    return R, t, p @ R.T + t, rms
-
-
-def _kabsch(p: np.ndarray, q: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
-    """Rotation and translation (no scale) with q ~ R p + t (Kabsch 1976), and the RMS residual."""
-    pc, qc = p.mean(axis=0), q.mean(axis=0)
-    U, _, Vt = np.linalg.svd((p - pc).T @ (q - qc))
-    D = np.diag([1.0, 1.0, np.sign(np.linalg.det(Vt.T @ U.T))])
-    R = Vt.T @ D @ U.T
-    t = qc - R @ pc
-    return R, t, float(np.sqrt(np.mean(np.sum((p @ R.T + t - q) ** 2, axis=1))))
 
 
 def _check(det: Detections, n_cameras: int, where: str) -> None:
