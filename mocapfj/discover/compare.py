@@ -45,7 +45,7 @@ from ..ident.conditioning import lowpass, noise_floor_sd, noise_gain
 from .memo import by_content
 
 __all__ = ["BAND_FRACTION", "MIN_BAND_HZ", "MIN_PERIOD_CORR", "comparison_band_hz", "excitation_period_s",
-           "Channel", "compare_channel", "combined_fit", "combined_floor_sd", "WHITE_BAND", "fit_change_sd"]
+           "Channel", "compare_channel", "in_band", "combined_fit", "combined_floor_sd", "WHITE_BAND", "fit_change_sd"]
 
 BAND_FRACTION = 0.6
 """The comparison band's upper edge as a fraction of the link's resonance sqrt(k / I) / 2 pi: the
@@ -178,7 +178,7 @@ def _period_noise_var(r: np.ndarray, fs_hz: float, period_s: float) -> tuple[flo
     return float(np.mean(v)), v.size            # dropouts, unevenly spread, stay in
 
 
-def _in_band(x: np.ndarray, fs_hz: float, band_hz: float) -> np.ndarray:
+def in_band(x: np.ndarray, fs_hz: float, band_hz: float) -> np.ndarray:
     """x (n,) through the comparison's low-pass, the filter's own start and end cut off."""
     edge = min(int(math.ceil(2.0 * fs_hz / band_hz)), x.size // 4)
     return lowpass(x, fs_hz, band_hz)[edge:x.size - edge]
@@ -203,7 +203,7 @@ def compare_channel(y: np.ndarray, y_hat: np.ndarray, raw: np.ndarray | None, fs
     ar = np.arange(yy.size)
     yy = np.interp(ar, ar[ok], yy[ok])
     yh = np.interp(ar, ar[ok], yh[ok])
-    yb, rb = _in_band(yy, fs_hz, band_hz), _in_band(yy - yh, fs_hz, band_hz)
+    yb, rb = in_band(yy, fs_hz, band_hz), in_band(yy - yh, fs_hz, band_hz)
     if center:
         rb = rb - rb.mean()
     sd_y = float(np.std(yb))
@@ -264,7 +264,7 @@ def fit_change_sd(t: np.ndarray, keep: np.ndarray, band_hz: float, fit: float, c
     for sd_y, sigma, dm in channels:
         if not (sd_y > 0 and np.isfinite(sigma)):
             continue
-        m = _in_band(np.nan_to_num(np.asarray(dm, dtype=np.float64)[sl]), fs, band_hz)
+        m = in_band(np.nan_to_num(np.asarray(dm, dtype=np.float64)[sl]), fs, band_hz)
         # d(e^2) of this channel: 2 <n, m> / (N sd_y^2)
         var += (2.0 * sigma * float(np.linalg.norm(m)) / math.sqrt(g) / (m.size * sd_y ** 2)) ** 2
     if not E > 0:

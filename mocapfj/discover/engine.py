@@ -245,12 +245,8 @@ def locate(fam: Families) -> dict:
     return out
 
 
-def _residual_of(fam: Families, family: str) -> tuple[np.ndarray, np.ndarray]:
-    return (fam.r_s, fam.keep_s) if family == "spring" else (fam.r_l, fam.keep_l)
-
-
 def _score(cand: Candidate, fam: Families, test: np.ndarray) -> dict:
-    r, keep = _residual_of(fam, cand.family)
+    r, keep = fam.residual(cand.family)
     m = keep & test
     r0 = r[m] - r[m].mean()
     r1 = (r - cand.contribution)[m]
@@ -293,7 +289,7 @@ def _search(fams, qdd, names, tried, holdout, skip=frozenset()):
             if (jn, eff) in skip:
                 continue
             family = "spring" if eff in SPRING_EFFECTS else "link"
-            cand = FITTERS[eff](fam, train & _residual_of(fam, family)[1], {k: v for k, v in qdd.items() if k != jn})
+            cand = FITTERS[eff](fam, train & fam.residual(family)[1], {k: v for k, v in qdd.items() if k != jn})
             if cand is None:
                 continue
             results.append((jn, cand, _score(cand, fam, ~train)))
@@ -341,7 +337,7 @@ def _augment(jn, cand, fams, qdd, current, banned: set, rejected: list):
     without simulations): refitted on the whole trial and applied. Returns (jn, candidate,
     augmented model), or None with the candidate banned and its reason in `rejected`."""
     fam = fams[jn]
-    full = FITTERS[cand.name](fam, _residual_of(fam, cand.family)[1], {k: v for k, v in qdd.items() if k != jn})
+    full = FITTERS[cand.name](fam, fam.residual(cand.family)[1], {k: v for k, v in qdd.items() if k != jn})
     reason = ""
     for c in ((full, cand) if full is not None else (cand,)):
         try:

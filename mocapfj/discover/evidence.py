@@ -23,7 +23,7 @@ import numpy as np
 
 from ..dynamics import JointModel
 from ..types import JointSignals
-from .compare import _in_band, fit_change_sd
+from .compare import in_band, fit_change_sd
 from .model import OutputError, coupling_input, predict, simulate_joint
 
 __all__ = ["Evidence", "Score"]
@@ -74,8 +74,8 @@ class Evidence:
             ok = np.isfinite(d)
             ar = np.arange(d.size)
             d = np.interp(ar, ar[ok], d[ok])
-            yd = _in_band(d, self.fs, self.band_hz)
-            yu = _in_band(self.u[sl], self.fs, self.band_hz)
+            yd = in_band(d, self.fs, self.band_hz)
+            yu = in_band(self.u[sl], self.fs, self.band_hz)
             self._rec[key] = (yd, yu, float(np.std(yd)), float(np.std(yu)))
         return self._rec[key]
 
@@ -99,9 +99,9 @@ class Evidence:
             if not (okd.any() and oku.any()):
                 return None
             dh, uh = np.interp(ar, ar[okd], dh[okd]), np.interp(ar, ar[oku], uh[oku])
-        rd = yd - _in_band(dh, self.fs, self.band_hz)
+        rd = yd - in_band(dh, self.fs, self.band_hz)
         rd = rd - rd.mean()
-        ru = yu - _in_band(uh, self.fs, self.band_hz)
+        ru = yu - in_band(uh, self.fs, self.band_hz)
         return rd, ru, sd_d, sd_u
 
     def predict(self, model: JointModel) -> tuple[np.ndarray, np.ndarray] | None:

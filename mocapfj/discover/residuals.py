@@ -84,6 +84,10 @@ class Families:
         """The residuals' low-pass (RESIDUAL_HZ), for a regressor formed at full band."""
         return lowpass(x, self.fs_hz, RESIDUAL_HZ)
 
+    def residual(self, family: str) -> tuple[np.ndarray, np.ndarray]:
+        """(the residual, the samples it keeps) of `family`: "spring" or "link"."""
+        return (self.r_s, self.keep_s) if family == "spring" else (self.r_l, self.keep_l)
+
     def spring_residual_for(self, delta: np.ndarray) -> np.ndarray:
         """r_s with another recorded deflection (e.g. the link angle on a shifted clock)."""
         return self.lp(self.tau_s - spring_torque_of(self.model, delta + self.q_zero_rad, self.t))

@@ -160,9 +160,13 @@ class Judge:
     def paired(self, a: Judged, b: Judged) -> tuple[float, float]:
         """(a's held-out fit minus b's, summed over the held-out recordings; the SD of that
         difference the noise gives, from the change between the two models' predictions)."""
+        return self.difference(a.joint, a.scores, b.scores)
+
+    def difference(self, jn: str, scores_a: dict, scores_b: dict) -> tuple[float, float]:
+        """:meth:`paired` for two models' held-out scores ({evidence name: Score})."""
         d, var = 0.0, 0.0
-        for ev in self.held_out(a.joint):
-            sa, sb = a.scores[ev.name], b.scores[ev.name]
+        for ev in self.held_out(jn):
+            sa, sb = scores_a[ev.name], scores_b[ev.name]
             d += sa.fit - sb.fit
             sd = ev.change_sd(sb, sa)
             var += sd ** 2 if math.isfinite(sd) else 0.0
@@ -173,7 +177,8 @@ class Judge:
         gain leads; another candidate of the same joint whose gain is within TIE_SDS noise SDs of
         the difference between their predictions ties with it, and among the tied the clearest
         equation-error signature (the lowest held-out criterion) is chosen, the physics-specific
-        test where the simulated fits cannot tell them apart."""
+        test where the simulated fits cannot tell them apart. Returns (the pick, what is reported
+        of the others it ties with)."""
         ok = [j for j in judged if j.admissible]
         if not ok:
             return None, []
@@ -203,9 +208,8 @@ class Judge:
         if c.rebuild is not None:
             c2 = refit(c, current[jn], self.evidence(jn, "trial"))[0]
         else:
-            from .engine import _residual_of
             fam = fams[jn]
-            c2 = FITTERS[c.name](fam, _residual_of(fam, c.family)[1], {k: v for k, v in qdd.items() if k != jn})
+            c2 = FITTERS[c.name](fam, fam.residual(c.family)[1], {k: v for k, v in qdd.items() if k != jn})
         for cc in ((c2, c) if c2 is not None else (c,)):
             try:
                 return cc, cc.apply(current[jn])
