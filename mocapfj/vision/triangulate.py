@@ -1,0 +1,580 @@
+"""Points seen by several calibrated cameras: batched N-view triangulation with uncertainty.
+
+Every function takes the observations of N points in C cameras as one array ``xy_px`` (C, N, 2)
+(pixels, OpenCV convention, docs/conventions.md), NaN where a camera did not see a point, so that
+any subset of cameras can see any point and no Python loop runs over points.
+
+1. **Undistortion** by a table per camera (:class:`UndistortionTable`): the undistorted normalised
+   coordinates of a grid of pixels (Newton's method, :func:`mocapfj.vision.projection.normalized_from_pixels`)
+   interpolated bilinearly. The grid is refined until the interpolation error at the cell centres,
+   where it is largest, is below ``tol_px`` (1e-3 px by default), and that bound is recorded.
+2. **Linear triangulation** (:func:`triangulate_linear`): the DLT's equations
+   ``(x P3 - P1) X~ = 0``, ``(y P3 - P2) X~ = 0`` for each view (Hartley and Zisserman 2003, §12.2),
+   with X~ = (X, 1) (their inhomogeneous variant). The normal matrix of a point is
+   ``sum_c (x^2 + y^2) P3 P3^T - x (P3 P1^T + P1 P3^T) - y (P3 P2^T + P2 P3^T) + P1 P1^T + P2 P2^T``,
+   linear in the features (x^2 + y^2, x, y, 1) of each view: one matrix product (N, 4C) x (4C, 9)
+   gives every point's 3 x 3 system, solved in closed form.
+3. **Gauss-Newton** on the reprojection error in pixels (:func:`triangulate`), with the analytic
+   point Jacobians of :func:`mocapfj.vision.projection.project_batch`; all points at once.
+4. **Robust camera subsets**: points with a view beyond the gate are triangulated again from every
+   pair of their cameras at once (the pairs' normal matrices are sums of the views'), every pair's
+   point is projected into every camera, and the pair with the least truncated cost (MSAC; Torr and
+   Zisserman 2000) sets the inliers, which are refined again. Exhaustive over pairs and vectorised:
+   the same input gives the same answer.
+5. **Covariance** ``sigma^2 (J^T J)^-1`` of each point from the pixel noise sigma (the rig's
+   ``sigma_px``, an argument, or the pooled residuals), the first-order error propagation of the
+   refinement's Jacobian J (Hartley and Zisserman 2003, §5.2).
+
+Conventions: world-to-camera extrinsics, metres, pixels 0-based at pixel centres (docs/conventions.md).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..errors import InputError
+from ..types import Camera, Rig
+from .projection import camera_parameters, normalized_from_pixels, project_batch
+
+__all__ = ["UndistortionTable", "undistortion_table", "triangulate_linear", "triangulate", "Triangulation",
+           "observation_array", "rig_sigma_px"]
+
+_CHUNK = 32768
+_IU = (np.array([0, 0, 0, 1, 1, 2, 0, 1, 2]), np.array([0, 1, 2, 1, 2, 2, 3, 3, 3]))
+"""The 9 entries of the 4 x 4 normal matrix the linear solve needs: a00 a01 a02 a11 a12 a22 and the
+last column b0 b1 b2."""
+
+
+# --- undistortion table ---------------------------------------------------------------------------
+
+@dataclass(frozen=True, eq=False)
+class UndistortionTable:
+    """Undistorted normalised coordinates on a pixel grid, interpolated bilinearly.
+
+    Attributes
+    ----------
+    camera : Camera
+    x0_px, y0_px : float
+        Pixel position of grid node (0, 0).
+    step_px : float
+        Grid spacing, pixels.
+    xn, yn : (ny, nx) float
+        Normalised coordinates (X/Z, Y/Z) at the nodes; NaN where the distortion cannot be inverted.
+    max_error_px : float
+        Largest interpolation error found at the cell centres (the worst place of a bilinear
+        interpolant), converted to pixels with the focal length.
+    """
+
+    camera: Camera
+    x0_px: float
+    y0_px: float
+    step_px: float
+    xn: np.ndarray
+    yn: np.ndarray
+    max_error_px: float
+
+    def normalized(self, xy_px) -> np.ndarray:
+        """Normalised coordinates (..., 2) of pixels (..., 2); NaN stays NaN. Pixels outside the
+        table (beyond the image by more than a cell) are undistorted exactly by Newton's method."""
+        xy = np.asarray(xy_px, dtype=np.float64)
+        shape = xy.shape
+        xy = xy.reshape(-1, 2)
+        ny, nx = self.xn.shape
+        gx = (xy[:, 0] - self.x0_px) / self.step_px
+        gy = (xy[:, 1] - self.y0_px) / self.step_px
+        ix = np.floor(gx)
+        iy = np.floor(gy)
+        with np.errstate(invalid="ignore"):
+            inside = (ix >= 0) & (ix < nx - 1) & (iy >= 0) & (iy < ny - 1)
+        ax = gx - ix
+        ay = gy - iy
+        idx = np.where(inside, iy * nx + ix, 0).astype(np.intp)
+        out = np.empty_like(xy)
+        for k, tab in enumerate((self.xn.ravel(), self.yn.ravel())):
+            a = tab.take(idx)
+            b = tab.take(idx + 1)
+            c = tab.take(idx + nx)
+            d = tab.take(idx + nx + 1)
+            top = a + ax * (b - a)
+            out[:, k] = top + ay * (c + ax * (d - c) - top)
+        outside = ~inside & np.isfinite(xy).all(axis=1)
+        if outside.any():
+            out[outside] = normalized_from_pixels(self.camera, xy[outside])
+        out[~inside & ~outside] = np.nan
+        return out.reshape(shape)
+
+
+_TABLES: dict = {}
+_TABLES_MAX = 64
+
+
+def undistortion_table(camera: Camera, *, tol_px: float = 1e-3, step_px: float = 8.0,
+                       min_step_px: float = 1.0) -> UndistortionTable:
+    """The undistortion table of `camera`, its grid refined until its error is below `tol_px`.
+
+    The grid spans the image and two cells beyond it; its step starts at `step_px` and halves
+    (not below `min_step_px`) while the interpolation error at the cell centres exceeds `tol_px`.
+    Tables depend on the intrinsics only (size, K, distortion) and are cached by them.
+    """
+    key = (camera.size, camera.K.tobytes(), camera.dist.tobytes(), float(tol_px), float(step_px), float(min_step_px))
+    cached = _TABLES.get(key)
+    if cached is not None:
+        return cached
+    w, h = camera.size
+    f = float(min(camera.K[0, 0], camera.K[1, 1]))
+    step = float(step_px)
+    while True:
+        gx = np.arange(-0.5 - 2 * step, w + 2 * step, step)
+        gy = np.arange(-0.5 - 2 * step, h + 2 * step, step)
+        X, Y = np.meshgrid(gx, gy)
+        n = normalized_from_pixels(camera, np.stack([X, Y], axis=-1))
+        table = UndistortionTable(camera, float(gx[0]), float(gy[0]), step, n[..., 0].copy(), n[..., 1].copy(),
+                                  math.nan)
+        cx, cy = np.meshgrid(gx[:-1] + step / 2, gy[:-1] + step / 2)
+        mid = np.stack([cx.ravel(), cy.ravel()], axis=1)
+        err = np.abs(table.normalized(mid) - normalized_from_pixels(camera, mid)).max(axis=1) * f
+        worst = float(np.nanmax(err, initial=0.0))
+        if worst <= tol_px or step / 2 < min_step_px:
+            break
+        step /= 2
+    for a in (table.xn, table.yn):
+        a.setflags(write=False)
+    table = UndistortionTable(camera, table.x0_px, table.y0_px, step, table.xn, table.yn, worst)
+    if len(_TABLES) >= _TABLES_MAX:
+        _TABLES.pop(next(iter(_TABLES)))
+    _TABLES[key] = table
+    return table
+
+
+# --- input ------------------------------------------------------------------------------------
+
+def _observations(rig: Rig, xy_px, where: str) -> tuple[np.ndarray, np.ndarray, int]:
+    """(xy (C, N, 2) float64, valid (C, N) bool, number of non-finite pixels ignored)."""
+    if not isinstance(rig, Rig):
+        raise InputError(None, "rig", "a Rig", type(rig).__name__)
+    xy = np.asarray(xy_px, dtype=np.float64)
+    n_cam = len(rig.cameras)
+    if xy.ndim != 3 or xy.shape[2] != 2:
+        raise InputError(where, "xy_px", "an array of shape (C, N, 2): pixels per camera and point", f"shape {xy.shape}")
+    if xy.shape[0] != n_cam:
+        raise InputError(where, "cameras", f"{n_cam} cameras (the rig's)", f"{xy.shape[0]} cameras in the observations")
+    finite = np.isfinite(xy).all(axis=2)
+    partial = np.isfinite(xy).any(axis=2) & ~finite          # one coordinate NaN, or an inf
+    n_bad = int(partial.sum() + np.isinf(xy).all(axis=2).sum())
+    return xy, finite, n_bad
+
+
+def rig_sigma_px(rig: Rig) -> float | None:
+    """The rig file's pixel noise (``[metadata] sigma_px``), or None when it has none."""
+    v = rig.metadata.get("sigma_px") if isinstance(rig.metadata, dict) else None
+    try:
+        v = float(v)
+    except (TypeError, ValueError):
+        return None
+    return v if math.isfinite(v) and v > 0 else None
+
+
+# --- linear step ----------------------------------------------------------------------------------
+
+def _feature_matrix(rig: Rig) -> np.ndarray:
+    """(4C, 9): row 4c + k maps feature k of camera c, (x^2 + y^2, x, y, 1), to the 9 entries."""
+    out = np.zeros((4 * len(rig.cameras), 9))
+    for c, cam in enumerate(rig.cameras):
+        P = np.hstack([cam.R_cam_world, cam.t_cam_world[:, None]])
+        p1, p2, p3 = P
+        mats = (np.outer(p3, p3), -(np.outer(p3, p1) + np.outer(p1, p3)), -(np.outer(p3, p2) + np.outer(p2, p3)),
+                np.outer(p1, p1) + np.outer(p2, p2))
+        for k, m in enumerate(mats):
+            out[4 * c + k] = m[_IU]
+    return out
+
+
+def _solve_normal(m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """X (n, 3) from the 9 normal-matrix entries (9, n) or (n, 9) last axis; and det (n,).
+
+    A X = -b with A = [[a00 a01 a02] [a01 a11 a12] [a02 a12 a22]] by the adjugate."""
+    a, b, c, e, f, h, r0, r1, r2 = (m[..., k] for k in range(9))
+    A11 = e * h - f * f
+    A12 = c * f - b * h
+    A13 = b * f - c * e
+    A22 = a * h - c * c
+    A23 = b * c - a * f
+    A33 = a * e - b * b
+    det = a * A11 + b * A12 + c * A13
+    with np.errstate(divide="ignore", invalid="ignore"):
+        inv = -1.0 / det
+        x = np.stack([(A11 * r0 + A12 * r1 + A13 * r2) * inv, (A12 * r0 + A22 * r1 + A23 * r2) * inv,
+                      (A13 * r0 + A23 * r1 + A33 * r2) * inv], axis=-1)
+    return x, det
+
+
+def _normalized_views(rig: Rig, xy: np.ndarray, valid: np.ndarray, sl: slice, tables) -> np.ndarray:
+    """Features (4C, n) of points `sl`: (x^2 + y^2, x, y, 1) per camera, zero where unseen."""
+    n = sl.stop - sl.start
+    feats = np.zeros((4 * len(rig.cameras), n))
+    for c in range(len(rig.cameras)):
+        v = valid[c, sl]
+        if not v.any():
+            continue
+        nrm = tables[c].normalized(xy[c, sl])
+        ok = v & np.isfinite(nrm[:, 0])
+        x = np.where(ok, nrm[:, 0], 0.0)
+        y = np.where(ok, nrm[:, 1], 0.0)
+        feats[4 * c] = x * x + y * y
+        feats[4 * c + 1] = x
+        feats[4 * c + 2] = y
+        feats[4 * c + 3] = ok
+    return feats
+
+
+def triangulate_linear(rig: Rig, xy_px, *, weights=None) -> tuple[np.ndarray, np.ndarray]:
+    """Linear (DLT) triangulation of N points from any subset of C cameras each.
+
+    Parameters
+    ----------
+    rig : Rig
+        C calibrated cameras.
+    xy_px : (C, N, 2) float
+        Pixels, NaN where a camera did not see the point.
+    weights : (C, N) float, optional
+        Weight of each view (e.g. 1 / sigma^2); default 1.
+
+    Returns
+    -------
+    p_world : (N, 3) float
+        Metres; NaN for points seen by fewer than two cameras.
+    n_views : (N,) int
+        Views used.
+    """
+    xy, valid, _ = _observations(rig, xy_px, "triangulate_linear")
+    tables = [undistortion_table(c) for c in rig.cameras]
+    G = _feature_matrix(rig)
+    n = xy.shape[1]
+    out = np.empty((n, 3))
+    wts = None if weights is None else np.broadcast_to(np.asarray(weights, dtype=np.float64), valid.shape)
+    for s in range(0, n, _CHUNK):
+        sl = slice(s, min(n, s + _CHUNK))
+        F = _normalized_views(rig, xy, valid, sl, tables)
+        if wts is not None:
+            F *= np.repeat(np.where(valid[:, sl], wts[:, sl], 0.0), 4, axis=0)
+        m = (G.T @ F).T
+        out[sl] = _solve_normal(m)[0]
+    n_views = valid.sum(axis=0)
+    out[n_views < 2] = np.nan
+    return out, n_views
+
+
+# --- refinement -----------------------------------------------------------------------------------
+
+def _params(rig: Rig):
+    ps = [camera_parameters(c) for c in rig.cameras]
+    return tuple(np.stack([p[k] for p in ps]) for k in range(4))
+
+
+def _gauss_newton(params, xy, use, w, p, iterations: int):
+    """Gauss-Newton on the weighted reprojection error of points p (N, 3) over views `use` (C, N).
+
+    Returns p, H (N, 3, 3) = sum w J^T J at p, residuals r (C, N, 2) px (NaN where not used or
+    behind the camera), depth z (C, N)."""
+    C, N = use.shape
+    p = p.copy()
+    converged = False
+    for it in range(iterations + 1):
+        ci, pi = np.nonzero(use & np.isfinite(p[:, 0])[None])
+        pj = project_batch(*params, ci, p[pi], jacobians=True)
+        r = pj.xy_px - xy[ci, pi]
+        good = np.isfinite(r).all(axis=1)
+        ww = np.where(good, w[ci, pi], 0.0)
+        r0 = np.where(good[:, None], r, 0.0)
+        J0 = np.where(good[:, None, None], pj.d_point, 0.0)
+        # H = sum J^T w J (6 entries), g = sum J^T w r (3): by bincount over the points
+        Hn = np.zeros((N, 9))
+        for k in range(6):
+            i, j = _IU[0][k], _IU[1][k]
+            Hn[:, k] = np.bincount(pi, ww * (J0[:, 0, i] * J0[:, 0, j] + J0[:, 1, i] * J0[:, 1, j]), minlength=N)
+        for i in range(3):
+            Hn[:, 6 + i] = np.bincount(pi, ww * (J0[:, 0, i] * r0[:, 0] + J0[:, 1, i] * r0[:, 1]), minlength=N)
+        if it == iterations or converged:
+            break
+        step, det = _solve_normal(Hn)
+        ok = det > 0
+        p[ok] += step[ok]
+        converged = not np.nanmax(np.abs(step[ok]), initial=0.0) > 1e-10
+    H = np.empty((N, 3, 3))
+    for k in range(6):
+        i, j = _IU[0][k], _IU[1][k]
+        H[:, i, j] = Hn[:, k]
+        H[:, j, i] = Hn[:, k]
+    res = np.full((C, N, 2), np.nan)
+    res[ci, pi] = r
+    z = np.full((C, N), np.nan)
+    z[ci, pi] = pj.z_cam
+    return p, H, res, z
+
+
+def _pair_hypotheses(rig: Rig, params, xy, valid, w, tables, gate_px: float):
+    """For each point, the inlier views (C, n) of the best two-view hypothesis (MSAC over all pairs of
+    its cameras), and whether another hypothesis with other inliers costs nearly as little (n,)."""
+    C, N = valid.shape
+    G = _feature_matrix(rig).reshape(C, 4, 9)
+    F = _normalized_views(rig, xy, valid, slice(0, N), tables).reshape(C, 4, N)
+    contrib = np.einsum("ckn,ckj->cnj", F * np.where(valid, w, 0.0)[:, None, :], G)   # (C, N, 9)
+    pairs = [(a, b) for a in range(C) for b in range(a + 1, C)]
+    costs = np.full((len(pairs), N), np.inf)
+    inliers = np.zeros((len(pairs), C, N), bool)
+    for k, (a, b) in enumerate(pairs):                 # C(C-1)/2 camera pairs, all points at once
+        idx = np.flatnonzero(valid[a] & valid[b])
+        if not idx.size:
+            continue
+        X, det = _solve_normal(contrib[a, idx] + contrib[b, idx])
+        ok = det > 0
+        idx, X = idx[ok], X[ok]
+        ci = np.repeat(np.arange(C), idx.size)
+        pj = project_batch(*params, ci, np.tile(X, (C, 1)), jacobians=False)
+        r = np.linalg.norm(pj.xy_px.reshape(C, idx.size, 2) - xy[:, idx], axis=2)
+        seen = valid[:, idx]
+        inl = seen & (r < gate_px)
+        # truncated quadratic: an outlier (or a view behind the camera) costs gate^2
+        cost = np.where(seen, np.minimum(np.nan_to_num(r, nan=np.inf), gate_px) ** 2, 0.0).sum(axis=0)
+        enough = inl.sum(axis=0) >= 2
+        costs[k, idx[enough]] = cost[enough]
+        inliers[k][:, idx[enough]] = inl[:, enough]
+    best = np.argmin(costs, axis=0)
+    cols = np.arange(N)
+    best_cost = costs[best, cols]
+    best_in = inliers[best, :, cols].T                                     # (C, N)
+    # another hypothesis within half a gate^2 whose inliers neither hold nor are held by the best's
+    near = costs < best_cost[None] + 0.5 * gate_px**2
+    extra_views = (inliers & ~best_in[None]).any(axis=1)
+    missing_views = (~inliers & best_in[None]).any(axis=1)
+    ambiguous = (near & extra_views & missing_views).any(axis=0)
+    best_in[:, ~np.isfinite(best_cost)] = False
+    return best_in, ambiguous
+
+
+@dataclass(frozen=True, eq=False)
+class Triangulation:
+    """Triangulated points with their uncertainty.
+
+    Attributes
+    ----------
+    p_world : (N, 3) float
+        Points in the world frame, metres; NaN where fewer than two views remained.
+    cov : (N, 3, 3) float
+        Covariance of each point, m^2 (first order, from the pixel noise `sigma_px`); NaN where p is.
+    used : (C, N) bool
+        Views used for each point (the camera mask).
+    residual_px : (C, N, 2) float
+        Reprojection residual of every view at the final point (projection minus observation), px;
+        NaN where the camera did not see the point; present for rejected views too.
+    ray_residual_m : (N,) float
+        RMS over used views of the distance from the point to each view's ray (|residual| times
+        depth over focal length), metres: the residual a mocap system reports.
+    sigma_px : float
+        Pixel noise SD the covariance assumes.
+    sigma_source : str
+        Where sigma came from: "argument", "rig" (its [metadata] sigma_px) or "residuals".
+    n_unseen : int
+        Points seen by fewer than two cameras: NaN.
+    n_rejected : int
+        Points seen by two or more cameras left NaN by the robust selection: fewer than two views
+        agreed, or two hypotheses with other views fitted about equally well (``n_ambiguous`` of
+        them): a point is left out rather than placed on a guess.
+    n_ambiguous : int
+    n_nonfinite : int
+        Non-finite pixel observations ignored.
+    n_outlier_views : int
+        Views set aside by the robust selection.
+    table_error_px : float
+        Largest error of the undistortion tables of the linear step, px.
+    """
+
+    p_world: np.ndarray
+    cov: np.ndarray
+    used: np.ndarray
+    residual_px: np.ndarray
+    ray_residual_m: np.ndarray
+    sigma_px: float
+    sigma_source: str
+    n_unseen: int
+    n_rejected: int
+    n_ambiguous: int
+    n_nonfinite: int
+    n_outlier_views: int
+    table_error_px: float
+    extra: dict = field(default_factory=dict)
+
+    @property
+    def n_views(self) -> np.ndarray:
+        """Views used per point, (N,) int."""
+        return self.used.sum(axis=0)
+
+    @property
+    def sd_m(self) -> np.ndarray:
+        """Predicted RMS 3D error of each point, sqrt(trace(cov)), (N,) metres."""
+        return np.sqrt(np.trace(self.cov, axis1=1, axis2=2))
+
+    def reprojection_rms_px(self) -> float:
+        """RMS of the used views' residuals (both coordinates), px."""
+        r = self.residual_px[self.used]
+        return float(np.sqrt(np.mean(r**2))) if r.size else math.nan
+
+    def to_dict(self) -> dict:
+        ok = np.isfinite(self.p_world[:, 0])
+        sd = self.sd_m[ok]
+        return {"n_points": int(ok.size), "n_triangulated": int(ok.sum()), "n_unseen": self.n_unseen,
+                "n_rejected": self.n_rejected, "n_ambiguous": self.n_ambiguous,
+                "n_nonfinite": self.n_nonfinite, "n_outlier_views": self.n_outlier_views,
+                "reprojection_rms_px": self.reprojection_rms_px(), "sigma_px": self.sigma_px,
+                "sigma_source": self.sigma_source, "views_mean": float(self.n_views[ok].mean()) if ok.any() else math.nan,
+                "predicted_sd_median_mm": float(np.median(sd) * 1e3) if sd.size else math.nan,
+                "table_error_px": self.table_error_px} | dict(self.extra)
+
+
+def triangulate(rig: Rig, xy_px, *, sigma_px=None, robust: bool = True, gate_px: float | None = None,
+                iterations: int = 3) -> Triangulation:
+    """N points from any subset of C cameras each: linear start, Gauss-Newton, robust views, covariance.
+
+    Parameters
+    ----------
+    rig : Rig
+        C calibrated cameras.
+    xy_px : (C, N, 2) float
+        Pixels; NaN where a camera did not see the point (a view with one coordinate NaN or an
+        infinite coordinate is ignored and counted in ``n_nonfinite``).
+    sigma_px : float or (C, N) float, optional
+        SD of the pixel noise of each coordinate. Default: the rig's ``[metadata] sigma_px``, else
+        estimated from the residuals (pooled over all points, degrees of freedom 2 n_views - 3).
+        Relative values weight the views; the covariance scales with them.
+    robust : bool
+        Set aside views beyond the gate (module docstring, step 4).
+    gate_px : float, optional
+        Residual beyond which a view is an outlier, px; default max(5 sigma, 1 px) (with sigma
+        from the rig or the argument; 1.5 px when sigma is to be estimated).
+    iterations : int
+        Gauss-Newton iterations at most (it stops when the steps fall below 1e-10 m).
+
+    Returns
+    -------
+    Triangulation
+    """
+    xy, valid, n_bad = _observations(rig, xy_px, "triangulate")
+    C, N = valid.shape
+    source = "argument"
+    if sigma_px is None:
+        s = rig_sigma_px(rig)
+        source = "rig" if s is not None else "residuals"
+        sig = np.full((C, N), 1.0 if s is None else s)
+    else:
+        sig = np.broadcast_to(np.asarray(sigma_px, dtype=np.float64), (C, N)).copy()
+        if not (np.isfinite(sig[valid]).all() and (sig[valid] > 0).all()):
+            raise InputError(None, "sigma_px", "positive finite pixel noise SDs", "a non-positive or non-finite value")
+    scalar_sigma = float(np.median(sig[valid])) if valid.any() else 1.0
+    w = 1.0 / sig**2
+    tables = [undistortion_table(c) for c in rig.cameras]
+    p, _ = triangulate_linear(rig, np.where(valid[..., None], xy, np.nan), weights=w)
+    params = _params(rig)
+    use = valid & (valid.sum(axis=0) >= 2)[None]
+    p, H, res, z = _gauss_newton(params, xy, use, w, p, iterations)
+    if gate_px is None:
+        if source == "residuals":           # a robust first guess: 1.4826 x the median absolute residual
+            r_used = np.abs(res[use & (use.sum(axis=0) >= 3)[None]])
+            guess = 1.4826 * float(np.median(r_used)) if r_used.size else 0.3
+            gate_px = max(5.0 * guess, 1.0)
+        else:
+            gate_px = max(5.0 * scalar_sigma, 1.0)
+    n_out = n_ambiguous = 0
+    n_seen2 = int((valid.sum(axis=0) >= 2).sum())
+    if robust:
+        rn = np.linalg.norm(res, axis=2)
+        flagged = (use & ~(rn < gate_px)).any(axis=0)
+        if flagged.any():
+            idx = np.flatnonzero(flagged)
+            sub_use, ambiguous = _pair_hypotheses(rig, params, xy[:, idx], valid[:, idx], w[:, idx], tables, gate_px)
+            sub_use[:, ambiguous] = False
+            n_ambiguous = int(ambiguous.sum())
+            for _ in range(2):                 # refine on the inliers, then take back views that fit
+                pf, _ = triangulate_linear(rig, np.where(sub_use[..., None], xy[:, idx], np.nan), weights=w[:, idx])
+                pf, Hf, rf, zf = _gauss_newton(params, xy[:, idx], sub_use, w[:, idx], pf, iterations)
+                ci = np.repeat(np.arange(C), idx.size)
+                pj = project_batch(*params, ci, np.tile(np.nan_to_num(pf), (C, 1)), jacobians=False)
+                rr = np.linalg.norm(pj.xy_px.reshape(C, idx.size, 2) - xy[:, idx], axis=2)
+                new_use = valid[:, idx] & (rr < gate_px) & np.isfinite(pf[:, 0])[None]
+                new_use &= (new_use.sum(axis=0) >= 2)[None] & ~ambiguous[None]
+                if np.array_equal(new_use, sub_use):
+                    break
+                sub_use = new_use
+            pf[sub_use.sum(axis=0) < 2] = np.nan
+            p[idx], H[idx], z[:, idx] = pf, Hf, zf
+            # residuals of every view that saw the point, at the final point
+            res[:, idx] = np.where(valid[:, idx, None], pj.xy_px.reshape(C, idx.size, 2) - xy[:, idx], np.nan)
+            n_out = int((use[:, idx] & ~sub_use).sum())
+            use[:, idx] = sub_use
+    use &= np.isfinite(p[:, 0])[None]
+    ok = use.sum(axis=0) >= 2
+    p[~ok] = np.nan
+    if source == "residuals":
+        dof = 2 * use.sum() - 3 * ok.sum()
+        rr = np.where(use, (res**2).sum(axis=2), 0.0).sum()
+        s2 = rr / dof if dof > 0 else math.nan
+        scalar_sigma = float(math.sqrt(s2)) if math.isfinite(s2) else math.nan
+        H = H / (scalar_sigma**2 if math.isfinite(scalar_sigma) else math.nan)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        cov = np.full((N, 3, 3), np.nan)
+        good = ok & (np.linalg.det(H) > 0)
+        cov[good] = np.linalg.inv(H[good])
+    f = np.array([0.5 * (c.K[0, 0] + c.K[1, 1]) for c in rig.cameras])[:, None]
+    dist_m = np.linalg.norm(res, axis=2) * z / f
+    with np.errstate(invalid="ignore"):
+        ray = np.sqrt(np.where(use, dist_m**2, 0.0).sum(axis=0) / use.sum(axis=0))
+    ray[~ok] = np.nan
+    return Triangulation(p_world=p, cov=cov, used=use, residual_px=res, ray_residual_m=ray,
+                         sigma_px=scalar_sigma, sigma_source=source, n_unseen=N - n_seen2,
+                         n_rejected=int(n_seen2 - ok.sum()), n_ambiguous=n_ambiguous,
+                         n_nonfinite=n_bad, n_outlier_views=n_out,
+                         table_error_px=max(t.max_error_px for t in tables), extra={})
+
+
+def observation_array(frame, camera, point, xy_px, n_cameras: int, where: str = "detections"):
+    """Labelled 2D observations as the (C, K, 2) array of :func:`triangulate`.
+
+    Parameters
+    ----------
+    frame, camera, point : (n,) int
+        Frame, camera and point id of each observation (point ids >= 0).
+    xy_px : (n, 2) float
+    n_cameras : int
+
+    Returns
+    -------
+    xy : (C, K, 2) float
+        NaN where unseen; K = number of distinct (frame, point) keys.
+    keys : (K, 2) int
+        (frame, point) of each column, sorted.
+
+    A camera that saw the same point twice in a frame is refused, naming the first such row.
+    """
+    frame = np.asarray(frame, dtype=np.int64)
+    camera = np.asarray(camera, dtype=np.int64)
+    point = np.asarray(point, dtype=np.int64)
+    xy_px = np.asarray(xy_px, dtype=np.float64)
+    if camera.size and (camera.min() < 0 or camera.max() >= n_cameras):
+        raise InputError(where, "camera", f"camera numbers 0..{n_cameras - 1} (the rig has {n_cameras})",
+                         f"camera {int(camera.max() if camera.max() >= n_cameras else camera.min())}")
+    pairs = np.stack([frame, point], axis=1)
+    keys, col = np.unique(pairs, axis=0, return_inverse=True)
+    col = col.ravel()
+    flat = camera * len(keys) + col
+    uniq, first, counts = np.unique(flat, return_index=True, return_counts=True)
+    if (counts > 1).any():
+        dup = uniq[counts > 1][0]
+        rows = np.flatnonzero(flat == dup)
+        raise InputError(where, f"row {int(rows[1])} (frame {int(frame[rows[1]])}, camera {int(camera[rows[1]])}, "
+                         f"point_id {int(point[rows[1]])})", "one detection per camera, frame and point_id",
+                         f"a second one (first at row {int(rows[0])})")
+    xy = np.full((n_cameras, len(keys), 2), np.nan)
+    xy[camera, col] = xy_px
+    return xy, keys
