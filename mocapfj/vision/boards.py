@@ -253,11 +253,22 @@ def _sector_based(grey: np.ndarray, cols: int, rows: int) -> np.ndarray | None:
 def _detect_chessboard(grey: np.ndarray, board: Board):
     cols, rows = board.columns, board.rows
     points = saddle_points(grey)
-    tries = [("grow", lambda: grow_lattice(grey, cols, rows, points=points)),
-             ("classic", lambda: _classic(grey, cols, rows))]
-    if len(points[0]) >= 0.5 * cols * rows:
-        # the sector-based detector costs about a second per megapixel: only where X-junctions are
-        tries.append(("sb", lambda: _sector_based(grey, cols, rows)))
+    stats: dict = {}
+
+    def sector_based():
+        # it costs about a second per megapixel: only where most of a board grew, not a larger one
+        # and not one the image's edge cuts (no detector finds a chessboard that is not whole)
+        xy = stats["best_xy"]
+        if stats["best"] < 0.75 * cols * rows or stats["larger"] or len(xy) < 2:
+            return None
+        step = np.median(cKDTree(xy).query(xy, k=2)[0][:, 1])
+        h, w = grey.shape
+        if min(xy[:, 0].min(), xy[:, 1].min(), w - 1 - xy[:, 0].max(), h - 1 - xy[:, 1].max()) < 1.5 * step:
+            return None
+        return _sector_based(grey, cols, rows)
+
+    tries = [("grow", lambda: grow_lattice(grey, cols, rows, points=points, stats=stats)),
+             ("classic", lambda: _classic(grey, cols, rows)), ("sb", sector_based)]
     for method, find in tries:
         grid = find()
         if grid is None:
@@ -295,14 +306,27 @@ def _orient_chessboard(grey: np.ndarray, grid: np.ndarray, board: Board) -> np.n
 
 def _inconsistent(ij: np.ndarray, xy: np.ndarray) -> np.ndarray:
     """Points that do not fit their neighbours: the leave-one-out error against the homography of
-    the points within two squares (board grid units `ij`) above 0.25 of the local spacing where
-    the point is surrounded (interpolated), above 0.5 at the edge of what was seen (extrapolated,
-    which strong distortion bends). A misassembled lattice is off by about one spacing."""
-    q, ok = predict_nodes(ij, ij, xy)
+    the points within one square (board grid units `ij`; two where one square holds too few), or
+    against a quadratic extrapolation along its row or column when that is nearer, above 0.25 of
+    the local spacing where the point is surrounded (interpolated), above 0.5 at the edge of what
+    was seen (extrapolated, which strong distortion bends). A misassembled lattice is off by about
+    one spacing."""
+    q, ok = predict_nodes(ij, ij, xy, reach=1)
+    far = ~ok
+    if far.any():
+        q2, ok2 = predict_nodes(ij[far], ij, xy, reach=2)
+        q[far], ok[far] = q2, ok2
     spacing = np.minimum(np.linalg.norm(q[:, 1] - q[:, 0], axis=1), np.linalg.norm(q[:, 2] - q[:, 0], axis=1))
     err = np.linalg.norm(q[:, 0] - xy, axis=1)
     r = np.rint(ij).astype(np.int64)
     known = set(map(tuple, r.tolist()))
+    at = {k: n for n, k in enumerate(map(tuple, r.tolist()))}
+    for n, (i, j) in enumerate(r.tolist()):      # or a quadratic along its row or column, which bends
+        for di, dj in ((1, 0), (-1, 0), (0, 1), (0, -1)):
+            back = [at.get((i - m * di, j - m * dj)) for m in (1, 2, 3)]
+            if None not in back:
+                e = 3.0 * xy[back[0]] - 3.0 * xy[back[1]] + xy[back[2]]
+                err[n] = min(err[n], np.linalg.norm(e - xy[n]))
     inside = np.array([all(n in known for n in ((i - 1, j), (i + 1, j), (i, j - 1), (i, j + 1))) for i, j in r.tolist()],
                       dtype=bool)
     with np.errstate(invalid="ignore"):
@@ -315,9 +339,10 @@ def _finish_chessboard(grey: np.ndarray, grid: np.ndarray, board: Board) -> np.n
         return None
     radius = np.clip(0.2 * lattice_spacing(grid).ravel(), 3.0, 8.0)
     xy, ok = refine_saddles(grey, grid.reshape(-1, 2), radius)
-    if ok.mean() < 0.9:
-        return None
-    xy[~ok] = grid.reshape(-1, 2)[~ok]
+    if not ok.all():                                   # again with the smallest disc, else not a board
+        xy[~ok], ok[~ok] = refine_saddles(grey, grid.reshape(-1, 2)[~ok], 3.0)
+        if not ok.all():
+            return None
     grid = _orient_chessboard(grey, xy.reshape(grid.shape), board)
     j, i = np.mgrid[0:board.rows, 0:board.columns]
     ij = np.stack([i.ravel(), j.ravel()], 1).astype(np.float64)
@@ -340,14 +365,23 @@ def _continues(grey: np.ndarray, ij: np.ndarray, xy: np.ndarray, board: Board) -
     spacing = np.minimum(np.linalg.norm(q[:, 1] - q[:, 0], axis=1), np.linalg.norm(q[:, 2] - q[:, 0], axis=1))
     radius = np.clip(0.2 * np.nan_to_num(spacing, nan=15.0), 3.0, 8.0)
     found = np.zeros(len(ring), bool)
-    pr, conv = refine_saddles(grey, q[inside, 0], radius[inside])
+    pr = np.full((len(ring), 2), np.nan)
+    conv = np.zeros(len(ring), bool)
+    pr[inside], conv[inside] = refine_saddles(grey, q[inside, 0], radius[inside])
     light = cv2.GaussianBlur(grey.astype(np.float32), (0, 0), 0.7)
-    found[np.nonzero(inside)[0]] = conv & xjunction_test(light, pr, 3.0)[0]
     start = 0
     for side in sides:
-        if found[start:start + len(side)].sum() >= max(2, 0.5 * len(side)):
-            return True
+        sl = slice(start, start + len(side))
         start += len(side)
+        sel = np.nonzero(conv[sl])[0] + sl.start
+        if len(sel) < max(2, 0.5 * len(side)):
+            continue
+        # a junction of a larger board stays symmetric out to a third of a square; the corners of
+        # the outer squares against a thin white border and the background beyond do not
+        r = max(3.0, 0.3 * float(np.nanmedian(spacing[sel])))
+        found[sel] = xjunction_test(light, pr[sel], r)[0]
+        if found[sl].sum() >= max(2, 0.5 * len(side)):
+            return True
     return False
 
 

@@ -151,9 +151,12 @@ def saddle_points(grey: np.ndarray, sigma: float = 1.5, radii=(3.0, 5.0),
     light = _float_image(grey, 0.7)
     # a loose test first (the strict one needs the junction's centre within a fraction of a pixel),
     # then the symmetric refinement, then the strict test on every radius
-    loose = xjunction_test(light, p, max(radii), max_odd=np.inf, max_first=1.0)[0]
+    # (a saddle response's peak can sit 2-3 px from the junction of a blurred, compressed print)
+    loose = np.zeros(len(p), bool)
+    for r in (max(radii), max(radii) + 2.0):
+        loose |= xjunction_test(light, p, r, max_odd=np.inf, max_first=1.0)[0]
     p, sv = p[loose], sv[loose]
-    p, ok = refine_saddles(grey, p, min(radii) + 1.0)
+    p, ok = refine_saddles(grey, p, min(radii) + 1.0, max_move=1.0)
     p, sv = p[ok], sv[ok]
     good = np.zeros(len(p), bool)
     angles = np.full((len(p), 2), np.nan)
@@ -174,8 +177,8 @@ def saddle_points(grey: np.ndarray, sigma: float = 1.5, radii=(3.0, 5.0),
     return p[keep], sv[keep].astype(np.float64), angles[keep]
 
 
-def refine_saddles(grey: np.ndarray, p, radius_px, iterations: int = 12,
-                   smooth_sigma: float = 0.7) -> tuple[np.ndarray, np.ndarray]:
+def refine_saddles(grey: np.ndarray, p, radius_px, iterations: int = 12, smooth_sigma: float = 0.7,
+                   max_move: float = 0.5) -> tuple[np.ndarray, np.ndarray]:
     """Sub-pixel X-junction positions by point symmetry (module docstring, step 3).
 
     Parameters
@@ -189,12 +192,14 @@ def refine_saddles(grey: np.ndarray, p, radius_px, iterations: int = 12,
         Gauss-Newton steps at most.
     smooth_sigma : float
         Gaussian smoothing of the image before sampling, pixels.
+    max_move : float
+        Largest move accepted, as a share of the radius.
 
     Returns
     -------
     p_refined : (n, 2) float
     ok : (n,) bool
-        Converged, moved less than `radius_px` / 2 and stayed inside the image.
+        Converged, moved less than `max_move` x `radius_px` and stayed inside the image.
     """
     p0 = np.asarray(p, dtype=np.float64).reshape(-1, 2)
     n = len(p0)
@@ -257,7 +262,7 @@ def refine_saddles(grey: np.ndarray, p, radius_px, iterations: int = 12,
         active[ia[done]] = False
     moved = np.linalg.norm(c - p0, axis=1)
     c = c + origin
-    ok = (np.isfinite(c).all(axis=1) & (moved < 0.5 * radius) & (c[:, 0] >= 0) & (c[:, 1] >= 0)
+    ok = (np.isfinite(c).all(axis=1) & (moved < max_move * radius) & (c[:, 0] >= 0) & (c[:, 1] >= 0)
           & (c[:, 0] <= wd - 1) & (c[:, 1] <= h - 1))
     c[~np.isfinite(c).all(axis=1)] = p_img[~np.isfinite(c).all(axis=1)]
     return c, ok
@@ -268,23 +273,75 @@ def _angdiff(a, b):
     return np.minimum(d, np.pi - d)
 
 
-def _seed(p: np.ndarray, angles: np.ndarray, tree: cKDTree, s: int) -> dict | None:
-    """A seed square {(i, j): point index} at candidate s, or None."""
-    d, nn = tree.query(p[s], k=min(13, len(p)))
-    nn = nn[1:]
-    v = p[nn] - p[s]
-    va = np.arctan2(v[:, 1], v[:, 0]) % np.pi
+def _edge_contrast(light: np.ndarray, a: np.ndarray, b: np.ndarray) -> float:
+    """How much the segment a-b looks like an edge between a dark and a bright square all along:
+    the grey levels a fifth of its length to either side, at 20, 35, 50, 65 and 80 % along it,
+    differ with one sign; the weakest difference as a share of the strongest (about 1 for an
+    edge, about 0 for a square's diagonal, which crosses the middle of a square, or a step that
+    leaves the board)."""
+    d = b - a
+    n = np.array([-d[1], d[0]]) * 0.2
+    t = np.array([0.2, 0.35, 0.5, 0.65, 0.8])[:, None]
+    pts = np.vstack([a + t * d + n, a + t * d - n]).astype(np.float32)
+    v = cv2.remap(light, pts[:, 0:1], pts[:, 1:2], cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE).ravel()
+    diff = v[:5] - v[5:]
+    top = np.abs(diff).max()
+    if top < 6.0:
+        return 0.0
+    return float((diff * np.sign(diff.sum())).min() / top)
+
+
+def _step(p: np.ndarray, tree: cKDTree, light: np.ndarray, k: int, direction: np.ndarray,
+          tol_deg: float = 20.0, lengths: tuple[float, float] | None = None) -> int | None:
+    """The lattice neighbour of candidate k in `direction` (image vector): the nearest candidate
+    within `tol_deg` of it whose segment from k is a square's edge (`_edge_contrast` above 0.7),
+    and, with `lengths` (lo, hi), between lo and hi times the length of `direction` away."""
+    _, nn = tree.query(p[k], k=min(40, len(p)))
+    step = np.linalg.norm(direction)
+    for c in nn[1:]:
+        v = p[c] - p[k]
+        if lengths is not None and not lengths[0] * step <= np.linalg.norm(v) <= lengths[1] * step:
+            continue
+        cosang = v @ direction / max(np.linalg.norm(v) * np.linalg.norm(direction), 1e-12)
+        if cosang > np.cos(np.radians(tol_deg)) and _edge_contrast(light, p[k], p[c]) > 0.7:
+            return int(c)
+    return None
+
+
+def _seed(p: np.ndarray, angles: np.ndarray, tree: cKDTree, s: int, light: np.ndarray) -> dict | None:
+    """A seed square {(i, j): point index} at candidate s, or None.
+
+    Its arms are the nearest candidates along each of the junction's two lines whose segments are
+    edges between a dark and a bright square (a diagonal neighbour, which strong foreshortening
+    can bring near a line's direction, crosses the middle of a square); the fourth corner is the
+    neighbour of the arms' ends along the other arm, the same from both."""
     arms = []
     for line in (0, 1):
-        m = np.nonzero(_angdiff(va, angles[s, line]) < np.radians(15))[0]
-        if not len(m):
+        a = angles[s, line]
+        ends = [_step(p, tree, light, s, sign * np.array([np.cos(a), np.sin(a)]), 15.0) for sign in (1.0, -1.0)]
+        ends = [e for e in ends if e is not None]
+        if not ends:
             return None
-        arms.append(int(nn[m[0]]))                                   # the nearest along this line
+        arms.append(min(ends, key=lambda e: np.linalg.norm(p[e] - p[s])))
     u, w = p[arms[0]] - p[s], p[arms[1]] - p[s]
-    dd, k = tree.query(p[s] + u + w)
-    if dd > 0.3 * min(np.linalg.norm(u), np.linalg.norm(w)) or k in (s, *arms):
+    via_u = _step(p, tree, light, arms[0], w)
+    via_w = _step(p, tree, light, arms[1], u)
+    k = via_u if via_u is not None else via_w
+    if k is None or (via_w is not None and via_w != k) or k in (s, *arms):
         return None
-    return {(0, 0): s, (1, 0): arms[0], (0, 1): arms[1], (1, 1): int(k)}
+    return {(0, 0): s, (1, 0): arms[0], (0, 1): arms[1], (1, 1): k}
+
+
+def _line_predictions(node: tuple, grid: dict, p: np.ndarray) -> list:
+    """Quadratic extrapolations of `node` along the lattice's rows and columns: p0 = 3 p1 - 3 p2 + p3
+    from three known nodes in a line behind it (they follow the bending of strong distortion)."""
+    out = []
+    for di, dj in ((1, 0), (-1, 0), (0, 1), (0, -1)):
+        back = [(node[0] - m * di, node[1] - m * dj) for m in (1, 2, 3)]
+        if all(b in grid for b in back):
+            a, b, c = (p[grid[q]] for q in back)
+            out.append(3.0 * a - 3.0 * b + c)
+    return out
 
 
 def predict_nodes(nodes, known_ij, known_xy, reach: int = 2) -> tuple[np.ndarray, np.ndarray]:
@@ -350,7 +407,8 @@ def predict_nodes(nodes, known_ij, known_xy, reach: int = 2) -> tuple[np.ndarray
     return q, ok
 
 
-def _grow(p: np.ndarray, angles: np.ndarray, tree: cKDTree, grid: dict, max_nodes: int) -> dict:
+def _grow(p: np.ndarray, angles: np.ndarray, tree: cKDTree, grid: dict, max_nodes: int,
+          light: np.ndarray) -> dict:
     """Grow `grid` {(i, j): candidate} round by round (module docstring, step 2)."""
     used = set(grid.values())
     tried: dict = {}                      # node -> nearby known nodes when it last failed
@@ -369,6 +427,12 @@ def _grow(p: np.ndarray, angles: np.ndarray, tree: cKDTree, grid: dict, max_node
         spacing = np.minimum(np.linalg.norm(q[:, 1] - q[:, 0], axis=1), np.linalg.norm(q[:, 2] - q[:, 0], axis=1))
         dd, kk = tree.query(np.where(ok[:, None], q[:, 0], 0.0), k=2)
         d1, d2, k = dd[:, 0], dd[:, 1], kk[:, 0]
+        # where extrapolating along a row or column lands nearer a candidate, take that prediction
+        for f in np.nonzero(ok)[0]:
+            for e in _line_predictions(tuple(int(c) for c in front[f]), grid, p):
+                (e1, e2), (ek, _) = tree.query(e, k=2)
+                if e1 < d1[f]:
+                    d1[f], d2[f], k[f] = e1, e2, ek
         good = ok & np.isfinite(spacing) & (d1 <= 0.45 * spacing) & (d1 <= 0.5 * d2)
         good &= ~np.isin(k, list(used))
         # far from the prediction (strong distortion): the junction's lines must follow the lattice
@@ -379,6 +443,14 @@ def _grow(p: np.ndarray, angles: np.ndarray, tree: cKDTree, grid: dict, max_node
         added = 0
         for f in np.argsort(d1 / np.where(spacing > 0, spacing, np.inf)):
             node = tuple(int(c) for c in front[f])
+            if not good[f]:                          # no prediction close enough: follow the edges
+                walk = _walk(node, grid, p, tree, light)
+                if walk is not None and walk not in used:
+                    good[f], k[f] = True, walk
+            if good[f] and np.isfinite(spacing[f]):
+                # a junction of the board is symmetric out to a third of a square; the corners of the
+                # outer squares against a thin white border and a dark background beyond are not
+                good[f] = bool(xjunction_test(light, p[int(k[f])][None], max(3.0, 0.3 * spacing[f]))[0][0])
             if good[f] and int(k[f]) not in used:
                 grid[node] = int(k[f])
                 used.add(int(k[f]))
@@ -388,6 +460,19 @@ def _grow(p: np.ndarray, angles: np.ndarray, tree: cKDTree, grid: dict, max_node
         if not added:
             break
     return grid
+
+
+def _walk(node: tuple, grid: dict, p: np.ndarray, tree: cKDTree, light: np.ndarray) -> int | None:
+    """The candidate at `node` reached by stepping along lattice edges from its known neighbours
+    (`_step` in the direction of the row or column behind each); None unless they agree."""
+    found = set()
+    for di, dj in ((1, 0), (-1, 0), (0, 1), (0, -1)):
+        m1, m2 = (node[0] - di, node[1] - dj), (node[0] - 2 * di, node[1] - 2 * dj)
+        if m1 in grid and m2 in grid:
+            c = _step(p, tree, light, grid[m1], p[grid[m1]] - p[grid[m2]], 25.0, lengths=(0.4, 1.8))
+            if c is not None:
+                found.add(c)
+    return found.pop() if len(found) == 1 else None
 
 
 def _fill(win: np.ndarray, grey: np.ndarray, light: np.ndarray, p: np.ndarray, tree: cKDTree) -> np.ndarray | None:
@@ -401,8 +486,15 @@ def _fill(win: np.ndarray, grey: np.ndarray, light: np.ndarray, p: np.ndarray, t
             return None
         q = q[0]
         spacing = min(np.linalg.norm(q[1] - q[0]), np.linalg.norm(q[2] - q[0]))
-        d, k = tree.query(q[0])
-        start = p[k:k + 1] if d < 0.45 * spacing else q[:1]
+        preds = [q[0]]
+        for dx, dy in ((1, 0), (-1, 0), (0, 1), (0, -1)):         # quadratic along rows and columns
+            back = [(y - m * dy, x - m * dx) for m in (1, 2, 3)]
+            if all(0 <= b[0] < win.shape[0] and 0 <= b[1] < win.shape[1] and not np.isnan(win[b][0]) for b in back):
+                preds.append(3.0 * win[back[0]] - 3.0 * win[back[1]] + win[back[2]])
+        dists, idx = tree.query(np.array(preds))
+        best = int(np.argmin(dists))
+        d, k = dists[best], idx[best]
+        start = p[k:k + 1] if d < 0.45 * spacing else preds[best][None]
         r, ok = refine_saddles(grey, start, 4.0)
         if not ok[0] or not (xjunction_test(light, r, 3.0)[0][0] or xjunction_test(light, r, 5.0)[0][0]):
             return None
@@ -413,7 +505,7 @@ def _fill(win: np.ndarray, grey: np.ndarray, light: np.ndarray, p: np.ndarray, t
 
 
 def grow_lattice(grey: np.ndarray, cols: int, rows: int, *, max_seeds: int = 12, sigma: float = 1.5,
-                 points: tuple | None = None) -> np.ndarray | None:
+                 points: tuple | None = None, stats: dict | None = None) -> np.ndarray | None:
     """A chessboard's inner corners as a lattice grown from saddle points (module docstring).
 
     Parameters
@@ -427,6 +519,10 @@ def grow_lattice(grey: np.ndarray, cols: int, rows: int, *, max_seeds: int = 12,
         Scale of the saddle response, pixels.
     points : tuple, optional
         `saddle_points` (grey, sigma) when already computed.
+    stats : dict, optional
+        Filled with ``best`` (the most nodes of a grown lattice inside one cols x rows window),
+        ``best_xy`` (their pixels) and ``larger`` (a lattice held more than one full window: the
+        print is larger).
 
     Returns
     -------
@@ -434,8 +530,11 @@ def grow_lattice(grey: np.ndarray, cols: int, rows: int, *, max_seeds: int = 12,
         Pixel positions, in lattice order (not yet oriented: the caller fixes which corner is
         the board's first), or None when no seed grows into exactly one cols x rows block.
     """
+    stats = {} if stats is None else stats
+    stats.update(best=0, larger=False, best_xy=np.zeros((0, 2)))
     p, score, angles = saddle_points(grey, sigma) if points is None else points
     if len(p) < 0.8 * cols * rows:
+        stats["best"] = len(p)
         return None
     tree = cKDTree(p)
     light = _float_image(grey, 0.7)
@@ -446,11 +545,11 @@ def grow_lattice(grey: np.ndarray, cols: int, rows: int, *, max_seeds: int = 12,
             break
         if s in covered:
             continue
-        grid = _seed(p, angles, tree, int(s))
+        grid = _seed(p, angles, tree, int(s), light)
         if grid is None:
             continue
         seeds += 1
-        grid = _grow(p, angles, tree, grid, max_nodes=4 * cols * rows)
+        grid = _grow(p, angles, tree, grid, max_nodes=4 * cols * rows, light=light)
         covered |= set(grid.values())
         keys = np.array(list(grid.keys()))
         lo = keys.min(axis=0)
@@ -461,10 +560,18 @@ def grow_lattice(grey: np.ndarray, cols: int, rows: int, *, max_seeds: int = 12,
             full = ~np.isnan(a[..., 0])
             ny, nx = full.shape
             if ny < rows or nx < cols:
+                if full.sum() > stats["best"]:
+                    stats["best"], stats["best_xy"] = int(full.sum()), a[full]
                 continue
             csum = np.pad(full.cumsum(0).cumsum(1), ((1, 0), (1, 0)))
             cnt = csum[rows:, cols:] - csum[:-rows, cols:] - csum[rows:, :-cols] + csum[:-rows, :-cols]
             best = cnt.max()
+            if best > stats["best"]:
+                y, x = np.argwhere(cnt == best)[0]
+                w = a[y:y + rows, x:x + cols]
+                stats["best"], stats["best_xy"] = int(best), w[~np.isnan(w[..., 0])]
+            if best == rows * cols and (cnt == best).sum() > 1:
+                stats["larger"] = True
             if best < rows * cols - 3 or (cnt == best).sum() != 1:
                 continue
             y, x = np.argwhere(cnt == best)[0]
@@ -485,16 +592,17 @@ def lattice_size(grey: np.ndarray, *, max_seeds: int = 3, sigma: float = 1.5,
     if len(p) < 6:
         return None
     tree = cKDTree(p)
+    light = _float_image(grey, 0.7)
     best = None
     seeds = 0
     for s in np.argsort(-score):
         if seeds >= max_seeds:
             break
-        grid = _seed(p, angles, tree, int(s))
+        grid = _seed(p, angles, tree, int(s), light)
         if grid is None:
             continue
         seeds += 1
-        grid = _grow(p, angles, tree, grid, max_nodes=5000)
+        grid = _grow(p, angles, tree, grid, max_nodes=5000, light=light)
         keys = np.array(list(grid.keys()))
         lo = keys.min(axis=0)
         full = np.zeros(tuple(keys.max(axis=0) - lo + 1), bool)

@@ -320,26 +320,29 @@ def calibrate_intrinsics(detections: Sequence[BoardDetection | None], board: Boa
         npts = np.array([len(r) for r in res])
         view_rms = np.sqrt(np.array(sq) / npts)
         var = np.median(np.array(sq) / (2 * npts))                     # robust per-coordinate variance
-        # single features far from their reprojection
-        changed = False
-        for v, r in zip(active, res):
-            dist = np.linalg.norm(r, axis=1)
-            far = (dist > np.maximum(6.0 * np.sqrt(var), 1.0))
-            if far.any() and (len(r) - far.sum()) >= MIN_VIEW_POINTS:
-                idx = np.nonzero(keep_pts[v])[0]
-                keep_pts[v][idx[far]] = False
-                changed = True
-        if changed:
-            continue
-        chi2 = np.array(sq) / var
-        limit = stats.chi2.ppf(0.999, np.maximum(2 * npts - 6, 1))
-        out = (view_rms > 3.0 * np.median(view_rms)) & (chi2 > limit)
-        if not out.any() or len(rejected) + 1 > len(obj) // 3 or len(active) - 1 < MIN_VIEWS:
-            break
-        worst = int(np.argmax(np.where(out, view_rms, -1.0)))
+        far = [np.linalg.norm(r, axis=1) > max(6.0 * np.sqrt(var), 1.0) for r in res]
+        frac = np.array([f.mean() for f in far])
+        can_drop = len(rejected) + 1 <= len(obj) // 3 and len(active) - 1 >= MIN_VIEWS
+        if frac.max() > 0.2 and can_drop:                 # many features off: the view is wrong
+            worst = int(np.argmax(frac + 1e-6 * view_rms))
+            why = f"outlier: {100 * frac[worst]:.0f} % of its features more than 6 noise SDs off, RMS {view_rms[worst]:.3g} px"
+        else:
+            changed = False                               # a few features off: drop those
+            for v, f in zip(active, far):
+                if f.any() and (len(f) - f.sum()) >= MIN_VIEW_POINTS:
+                    keep_pts[v][np.nonzero(keep_pts[v])[0][f]] = False
+                    changed = True
+            if changed:
+                continue
+            chi2 = np.array(sq) / var
+            limit = stats.chi2.ppf(0.999, np.maximum(2 * npts - 6, 1))
+            out = (view_rms > 3.0 * np.median(view_rms)) & (chi2 > limit)
+            if not out.any() or not can_drop:
+                break
+            worst = int(np.argmax(np.where(out, view_rms, -1.0)))
+            why = f"outlier: RMS {view_rms[worst]:.3g} px, {view_rms[worst] / np.median(view_rms):.1f} x the median view's"
         v = active.pop(worst)
-        rejected[v] = (float(view_rms[worst]), f"outlier: RMS {view_rms[worst]:.3g} px, {view_rms[worst] / np.median(view_rms):.1f} "
-                                               f"x the median view's")
+        rejected[v] = (float(view_rms[worst]), why)
     o_act = [obj[v][keep_pts[v]] for v in active]
     i_act = [img[v][keep_pts[v]] for v in active]
     res, info = _residuals_and_info(o_act, i_act, sol, model)
