@@ -28,6 +28,7 @@ __all__ = [
     "Rig",
     "Board",
     "Wand",
+    "MarkerCluster",
     "Recording",
     "JointGeometry",
     "JointAngles",
@@ -362,6 +363,47 @@ class Wand:
     def length_m(self) -> float:
         """Distance between the first and the last marker, m."""
         return float(self.markers_m[-1])
+
+
+@dataclass(frozen=True, eq=False)
+class MarkerCluster:
+    """A rigid cluster of markers (a clusters file's ``[[clusters]]`` or ``[[tags]]``; docs/formats.md).
+
+    Attributes
+    ----------
+    name : str
+    labels : tuple of K str
+        Marker labels, unique (a tag's corners are ``<name>_0`` .. ``<name>_3``).
+    template_m : (K, 3) float
+        Marker positions in the cluster's own frame, metres; K >= 3, not all on one line.
+    tag_id : int or None
+        For an AprilTag: its id (its corners are the markers, in OpenCV's order).
+    tag_family : str or None
+        For an AprilTag: its family ("tag36h11").
+    """
+
+    name: str
+    labels: tuple[str, ...]
+    template_m: np.ndarray
+    tag_id: int | None = None
+    tag_family: str | None = None
+
+    def __post_init__(self) -> None:
+        labels = tuple(str(s) for s in self.labels)
+        where = f"cluster {self.name!r}"
+        tpl = check_array(self.template_m, f"{where} template_m", (len(labels), 3), finite=True)
+        if len(set(labels)) != len(labels):
+            raise InputError(None, f"{where} labels", "unique marker labels", sorted({s for s in labels if labels.count(s) > 1}))
+        centred = tpl - tpl.mean(axis=0) if tpl.shape[0] else tpl
+        sv = np.linalg.svd(centred, compute_uv=False) if tpl.shape[0] >= 2 else np.zeros(2)
+        if tpl.shape[0] < 3 or sv[1] < 1e-3 * max(sv[0], 1e-12):
+            raise InputError(None, f"{where} template_m", "at least 3 marker positions (m), not all on one line",
+                             f"{tpl.shape[0]} markers")
+        object.__setattr__(self, "name", str(self.name))
+        object.__setattr__(self, "labels", labels)
+        object.__setattr__(self, "template_m", freeze(tpl))
+        if self.tag_id is not None:
+            object.__setattr__(self, "tag_id", check_int(self.tag_id, f"{where} tag id", lo=0))
 
 
 @dataclass(frozen=True, eq=False)

@@ -40,7 +40,7 @@ from ..types import Camera, Rig
 from .projection import camera_parameters, normalized_from_pixels, project_batch
 
 __all__ = ["UndistortionTable", "undistortion_table", "triangulate_linear", "triangulate", "Triangulation",
-           "observation_array", "rig_sigma_px"]
+           "observation_array", "rig_sigma_px", "dlt_feature_matrix", "solve_dlt", "rig_parameters"]
 
 _CHUNK = 32768
 _IU = (np.array([0, 0, 0, 1, 1, 2, 0, 1, 2]), np.array([0, 1, 2, 1, 2, 2, 3, 3, 3]))
@@ -179,7 +179,7 @@ def rig_sigma_px(rig: Rig) -> float | None:
 
 # --- linear step ----------------------------------------------------------------------------------
 
-def _feature_matrix(rig: Rig) -> np.ndarray:
+def dlt_feature_matrix(rig: Rig) -> np.ndarray:
     """(4C, 9): row 4c + k maps feature k of camera c, (x^2 + y^2, x, y, 1), to the 9 entries."""
     out = np.zeros((4 * len(rig.cameras), 9))
     for c, cam in enumerate(rig.cameras):
@@ -192,7 +192,7 @@ def _feature_matrix(rig: Rig) -> np.ndarray:
     return out
 
 
-def _solve_normal(m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def solve_dlt(m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """X (n, 3) from the 9 normal-matrix entries (9, n) or (n, 9) last axis; and det (n,).
 
     A X = -b with A = [[a00 a01 a02] [a01 a11 a12] [a02 a12 a22]] by the adjugate."""
@@ -251,7 +251,7 @@ def triangulate_linear(rig: Rig, xy_px, *, weights=None) -> tuple[np.ndarray, np
     """
     xy, valid, _ = _observations(rig, xy_px, "triangulate_linear")
     tables = [undistortion_table(c) for c in rig.cameras]
-    G = _feature_matrix(rig)
+    G = dlt_feature_matrix(rig)
     n = xy.shape[1]
     out = np.empty((n, 3))
     wts = None if weights is None else np.broadcast_to(np.asarray(weights, dtype=np.float64), valid.shape)
@@ -261,7 +261,7 @@ def triangulate_linear(rig: Rig, xy_px, *, weights=None) -> tuple[np.ndarray, np
         if wts is not None:
             F *= np.repeat(np.where(valid[:, sl], wts[:, sl], 0.0), 4, axis=0)
         m = (G.T @ F).T
-        out[sl] = _solve_normal(m)[0]
+        out[sl] = solve_dlt(m)[0]
     n_views = valid.sum(axis=0)
     out[n_views < 2] = np.nan
     return out, n_views
@@ -269,7 +269,9 @@ def triangulate_linear(rig: Rig, xy_px, *, weights=None) -> tuple[np.ndarray, np
 
 # --- refinement -----------------------------------------------------------------------------------
 
-def _params(rig: Rig):
+def rig_parameters(rig: Rig):
+    """Stacked bundle-adjustment parameters of the rig's cameras, as :func:`project_batch` takes them:
+    (rvecs (C, 3), tvecs (C, 3), intrinsics (C, 9), extra (C, 9))."""
     ps = [camera_parameters(c) for c in rig.cameras]
     return tuple(np.stack([p[k] for p in ps]) for k in range(4))
 
@@ -299,7 +301,7 @@ def _gauss_newton(params, xy, use, w, p, iterations: int):
             Hn[:, 6 + i] = np.bincount(pi, ww * (J0[:, 0, i] * r0[:, 0] + J0[:, 1, i] * r0[:, 1]), minlength=N)
         if it == iterations or converged:
             break
-        step, det = _solve_normal(Hn)
+        step, det = solve_dlt(Hn)
         ok = det > 0
         p[ok] += step[ok]
         converged = not np.nanmax(np.abs(step[ok]), initial=0.0) > 1e-10
@@ -319,7 +321,7 @@ def _pair_hypotheses(rig: Rig, params, xy, valid, w, tables, gate_px: float):
     """For each point, the inlier views (C, n) of the best two-view hypothesis (MSAC over all pairs of
     its cameras), and whether another hypothesis with other inliers costs nearly as little (n,)."""
     C, N = valid.shape
-    G = _feature_matrix(rig).reshape(C, 4, 9)
+    G = dlt_feature_matrix(rig).reshape(C, 4, 9)
     F = _normalized_views(rig, xy, valid, slice(0, N), tables).reshape(C, 4, N)
     contrib = np.einsum("ckn,ckj->cnj", F * np.where(valid, w, 0.0)[:, None, :], G)   # (C, N, 9)
     pairs = [(a, b) for a in range(C) for b in range(a + 1, C)]
@@ -329,7 +331,7 @@ def _pair_hypotheses(rig: Rig, params, xy, valid, w, tables, gate_px: float):
         idx = np.flatnonzero(valid[a] & valid[b])
         if not idx.size:
             continue
-        X, det = _solve_normal(contrib[a, idx] + contrib[b, idx])
+        X, det = solve_dlt(contrib[a, idx] + contrib[b, idx])
         ok = det > 0
         idx, X = idx[ok], X[ok]
         ci = np.repeat(np.arange(C), idx.size)
@@ -476,7 +478,7 @@ def triangulate(rig: Rig, xy_px, *, sigma_px=None, robust: bool = True, gate_px:
     w = 1.0 / sig**2
     tables = [undistortion_table(c) for c in rig.cameras]
     p, _ = triangulate_linear(rig, np.where(valid[..., None], xy, np.nan), weights=w)
-    params = _params(rig)
+    params = rig_parameters(rig)
     use = valid & (valid.sum(axis=0) >= 2)[None]
     p, H, res, z = _gauss_newton(params, xy, use, w, p, iterations)
     if gate_px is None:

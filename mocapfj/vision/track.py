@@ -1,0 +1,716 @@
+"""Unlabelled 3D points over time to labelled marker trajectories, from rigid clusters.
+
+The points of each frame (from :mod:`mocapfj.vision.correspondence`) carry no identity. The
+clusters' rigid geometry names them, and time joins the frames where geometry alone cannot:
+
+1. **Linking** (all frames at once): each point is predicted into the next frame at constant
+   velocity (its velocity from a first, nearest-neighbour linking) and linked to the nearest point
+   there when the two are each other's nearest, within `max_speed_m_s` of motion and a 5 mm
+   prediction gate, and at most half as far as the second nearest (the ratio test: two markers
+   that pass close by are not linked rather than linked wrongly). The links are solved as an
+   assignment per frame (``scipy.optimize.linear_sum_assignment`` on the gated distances) only
+   where the mutual nearest neighbours conflict. Chains of links are *tracklets*.
+2. **Geometry, frame by frame** (all frames at once): for every cluster, every triangle of its
+   template whose three side lengths appear among a frame's points (within `tol_m`) fixes a pose
+   (Kabsch 1976); the pose predicts the cluster's other markers, the nearest points within `tol_m`
+   join, and the pose is refitted. Per frame and cluster the hypothesis with the most markers wins;
+   a tie between different assignments names nothing. A point two clusters claim keeps the claim
+   with more markers, or none.
+3. **Labels along tracklets**: a tracklet takes the label its frames voted for. A tracklet whose
+   frames voted for two labels in turn has been linked across two markers (a swap): it is cut
+   where the votes change, each part takes its own label, the frames between the two runs stay
+   unlabelled, and the swap is counted as repaired. A label on two points of one frame goes to
+   the one geometry voted for, or to none.
+4. **Rigid check**: per frame and cluster, Kabsch fits the template to the labelled markers;
+   a marker more than `tol_m` from the fit (with three or more present), or a pair whose distance
+   differs from the template's by more than `tol_m` (two present), loses its label. Occlusions
+   give NaN, never a wrong marker.
+5. **Gaps**: a marker missing for at most `max_gap_s` while three or more of its cluster's markers
+   are present is filled from the cluster's rigid fit of that frame (not a spline across the gap);
+   longer gaps stay NaN and are reported.
+
+Conventions: world frame, metres, time axis first (docs/conventions.md).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from itertools import combinations, permutations
+
+import numpy as np
+from scipy.optimize import linear_sum_assignment
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
+
+from ..errors import InputError
+from ..types import MarkerCluster, MarkerTrajectories
+
+__all__ = ["Labelling", "label_points", "link_points", "fit_clusters", "fill_gaps", "cluster_symmetry"]
+
+
+# --- rigid fits, batched --------------------------------------------------------------------------
+
+def _kabsch(p: np.ndarray, q: np.ndarray, w: np.ndarray):
+    """Weighted rigid fits q ~ R p + t for a batch: p (n, K, 3) template, q (n, K, 3) points,
+    w (n, K) weights (0 = absent). Returns R (n, 3, 3), t (n, 3)."""
+    sw = w.sum(axis=1, keepdims=True)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        pc = (w[..., None] * p).sum(axis=1) / sw
+        qc = (w[..., None] * np.nan_to_num(q)).sum(axis=1) / sw
+    H = np.einsum("nk,nki,nkj->nij", w, p - pc[:, None], np.nan_to_num(q) - qc[:, None])
+    U, _, Vt = np.linalg.svd(np.nan_to_num(H))
+    d = np.sign(np.linalg.det(np.swapaxes(Vt, 1, 2) @ np.swapaxes(U, 1, 2)))
+    D = np.zeros_like(H)
+    D[:, 0, 0] = D[:, 1, 1] = 1.0
+    D[:, 2, 2] = np.where(d == 0, 1.0, d)
+    R = np.swapaxes(Vt, 1, 2) @ D @ np.swapaxes(U, 1, 2)
+    t = qc - np.einsum("nij,nj->ni", R, pc)
+    return R, t
+
+
+def fit_clusters(xyz: np.ndarray, labels: Sequence[str], clusters: Sequence[MarkerCluster]):
+    """Per frame and cluster, the rigid fit of the template to the present markers.
+
+    Parameters
+    ----------
+    xyz : (T, M, 3) float
+        Labelled markers, NaN where missing.
+    labels : M str
+    clusters : sequence of MarkerCluster
+
+    Returns
+    -------
+    predicted : (T, M, 3) float
+        Each marker of a cluster where the cluster's fit exists (three or more of its markers
+        present, not all on one line), else NaN; markers of no cluster NaN.
+    residual : (T, M) float
+        Distance of each present marker from its cluster's fit, m (NaN without a fit).
+    n_present : (T, M) int
+        Markers of the same cluster present in the frame.
+    """
+    xyz = np.asarray(xyz, dtype=np.float64)
+    T, M = xyz.shape[:2]
+    index = {s: i for i, s in enumerate(labels)}
+    predicted = np.full((T, M, 3), np.nan)
+    residual = np.full((T, M), np.nan)
+    n_present = np.zeros((T, M), int)
+    for c in clusters:
+        cols = [index.get(s, -1) for s in c.labels]
+        have = [k for k, i in enumerate(cols) if i >= 0]
+        if len(have) < 3:
+            continue
+        idx = np.array([cols[k] for k in have])
+        tpl = c.template_m[have]
+        q = xyz[:, idx]
+        w = np.isfinite(q[..., 0]).astype(np.float64)
+        n = w.sum(axis=1).astype(int)
+        n_present[:, idx] = n[:, None]
+        ok = n >= 3
+        if not ok.any():
+            continue
+        R, t = _kabsch(np.broadcast_to(tpl, (int(ok.sum()),) + tpl.shape), q[ok], w[ok])
+        pred = np.einsum("nij,kj->nki", R, tpl) + t[:, None]
+        # a fit from markers on (nearly) one line leaves a rotation free: no fit
+        centred = np.where(w[ok][..., None] > 0, tpl[None] - (w[ok][..., None] * tpl).sum(1, keepdims=True)
+                           / w[ok].sum(1)[:, None, None], 0.0)
+        sv = np.linalg.svd(centred, compute_uv=False)
+        line = sv[:, 1] < 1e-3 * np.maximum(sv[:, 0], 1e-12)
+        pred[line] = np.nan
+        rows = np.flatnonzero(ok)
+        predicted[rows[:, None], idx[None]] = pred
+        residual[rows[:, None], idx[None]] = np.linalg.norm(pred - q[ok], axis=2)
+    return predicted, residual, n_present
+
+
+def cluster_symmetry(cluster: MarkerCluster, tol_m: float) -> tuple[int, ...] | None:
+    """A relabelling of the cluster's markers that its template cannot tell from the identity
+    (the rigid fit of the permuted template within `tol_m` RMS), or None. Such a cluster's labels
+    cannot be found from geometry."""
+    tpl = cluster.template_m
+    K = tpl.shape[0]
+    if K > 7:
+        return None
+    d = np.linalg.norm(tpl[:, None] - tpl[None], axis=2)
+    for perm in permutations(range(K)):
+        if perm == tuple(range(K)):
+            continue
+        if np.abs(d[np.ix_(perm, perm)] - d).max() > 2 * tol_m:
+            continue
+        R, t = _kabsch(tpl[None], tpl[list(perm)][None], np.ones((1, K)))
+        rms = np.sqrt(np.mean(np.sum((tpl @ R[0].T + t[0] - tpl[list(perm)]) ** 2, axis=1)))
+        if rms < tol_m:
+            return perm
+    return None
+
+
+# --- linking ---------------------------------------------------------------------------------------
+
+def _padded(frame: np.ndarray, p: np.ndarray, n_frames: int):
+    """Per frame slots: pos (T, P, 3) NaN-padded, sample index (T, P) -1, slot of each sample."""
+    order = np.argsort(frame, kind="stable")
+    f = frame[order]
+    start = np.searchsorted(f, np.arange(n_frames))
+    slot_sorted = np.arange(f.size) - start[f]
+    P = int(slot_sorted.max(initial=-1)) + 1
+    pos = np.full((n_frames, max(P, 1), 3), np.nan)
+    idx = np.full((n_frames, max(P, 1)), -1)
+    pos[f, slot_sorted] = p[order]
+    idx[f, slot_sorted] = order
+    slot = np.empty(frame.size, int)
+    slot[order] = slot_sorted
+    return pos, idx, slot
+
+
+def _mutual(D: np.ndarray, gate: float, ratio: float):
+    """Mutual nearest neighbours in D (T, P, Q) within gate and the ratio test both ways:
+    (t, i, j) of accepted links, and the conflicting pairs left for the assignment."""
+    with np.errstate(invalid="ignore"):
+        Dn = np.where(np.isfinite(D), D, np.inf)
+    P, Q = Dn.shape[1:]
+    if P == 0 or Q == 0:
+        return (np.zeros(0, int),) * 3
+    j1 = np.argmin(Dn, axis=2)
+    d1 = np.take_along_axis(Dn, j1[..., None], 2)[..., 0]
+    i1 = np.argmin(Dn, axis=1)
+    e1 = np.take_along_axis(Dn, i1[:, None, :], 1)[:, 0]
+    if Q > 1:
+        d2 = np.partition(Dn, 1, axis=2)[..., 1]
+    else:
+        d2 = np.full(d1.shape, np.inf)
+    if P > 1:
+        e2 = np.partition(Dn, 1, axis=1)[:, 1]
+    else:
+        e2 = np.full(e1.shape, np.inf)
+    t, i = np.nonzero(d1 < gate)
+    j = j1[t, i]
+    ok = (i1[t, j] == i) & (d1[t, i] <= ratio * d2[t, i]) & (e1[t, j] <= ratio * e2[t, j])
+    return t[ok], i[ok], j[ok]
+
+
+def link_points(frame, p_world, n_frames: int, *, rate_hz: float, max_speed_m_s: float = 3.0,
+                gate_m: float = 0.005, ratio: float = 0.5) -> np.ndarray:
+    """Tracklet id of each point (first linking step of the module docstring).
+
+    Parameters
+    ----------
+    frame : (n,) int
+    p_world : (n, 3) float
+    n_frames : int
+    rate_hz : float
+    max_speed_m_s : float
+        Fastest marker speed considered (first linking gate = max_speed / rate).
+    gate_m : float
+        Gate around the constant-velocity prediction, m.
+    ratio : float
+        A link's distance must be at most `ratio` times the second nearest's, both ways.
+
+    Returns
+    -------
+    (n,) int
+        Tracklet ids 0..; points of one tracklet are in consecutive frames.
+    """
+    frame = np.asarray(frame, dtype=np.int64)
+    p = np.asarray(p_world, dtype=np.float64)
+    n = frame.size
+    if n == 0:
+        return np.zeros(0, int)
+    pos, idx, slot = _padded(frame, p, n_frames)
+    step = max_speed_m_s / rate_hz
+    # pass 1: nearest neighbours without prediction, for velocities
+    D = np.linalg.norm(pos[:-1, :, None] - pos[1:, None], axis=3)
+    t, i, j = _mutual(D, step, ratio)
+    vel = np.zeros_like(pos)
+    vel[t + 1, j] = pos[t + 1, j] - pos[t, i]
+    has_vel = np.zeros(pos.shape[:2], bool)
+    has_vel[t + 1, j] = True
+    # pass 2: constant-velocity prediction
+    pred = pos + vel
+    D2 = np.linalg.norm(pred[:-1, :, None] - pos[1:, None], axis=3)
+    gate = np.where(has_vel[:-1], gate_m, step)[..., None]
+    D2 = np.where(D2 < gate, D2, np.inf)
+    t, i, j = _mutual(D2, np.inf, ratio)
+    # conflicts: points of frame t and t + 1 left unlinked with gated candidates between them are
+    # assigned per frame (linear_sum_assignment), each link still passing the ratio test
+    free_a = np.isfinite(pos[:-1, :, 0]).copy()
+    free_b = np.isfinite(pos[1:, :, 0]).copy()
+    free_a[t, i] = False
+    free_b[t, j] = False
+    cand = np.isfinite(D2) & free_a[:, :, None] & free_b[:, None, :]
+    extra = []
+    for f in np.flatnonzero(cand.any(axis=(1, 2))):
+        rows = np.flatnonzero(cand[f].any(axis=1))
+        cols = np.flatnonzero(cand[f].any(axis=0))
+        sub = D2[f][np.ix_(rows, cols)]
+        r, c = linear_sum_assignment(np.where(np.isfinite(sub), sub, 1e6))
+        for rr, cc in zip(r, c):
+            d = sub[rr, cc]
+            if not np.isfinite(d):
+                continue
+            others = np.r_[np.delete(D2[f, rows[rr]], cols[cc]), np.delete(D2[f, :, cols[cc]], rows[rr])]
+            if d <= ratio * others.min(initial=np.inf):
+                extra.append((f, rows[rr], cols[cc]))
+    if extra:
+        e = np.array(extra)
+        t, i, j = np.r_[t, e[:, 0]], np.r_[i, e[:, 1]], np.r_[j, e[:, 2]]
+    src = idx[t, i]
+    dst = idx[t + 1, j]
+    g = coo_matrix((np.ones(src.size), (src, dst)), shape=(n, n)).tocsr()
+    _, tid = connected_components(g, directed=False)
+    return tid
+
+
+# --- geometric votes ----------------------------------------------------------------------------------
+
+def _triangles(tpl: np.ndarray):
+    """Triangles (a, b, c) of a template with area, the best conditioned first."""
+    out = []
+    for a, b, c in combinations(range(tpl.shape[0]), 3):
+        area = 0.5 * np.linalg.norm(np.cross(tpl[b] - tpl[a], tpl[c] - tpl[a]))
+        out.append((area, (a, b, c)))
+    out.sort(reverse=True)
+    return [t for area, t in out if area > 1e-5]
+
+
+def _triad(p: np.ndarray) -> np.ndarray:
+    """Orthonormal frames (n, 3, 3) (columns) of triangles p (n, 3, 3): the first side, the
+    in-plane perpendicular, the normal."""
+    e1 = p[:, 1] - p[:, 0]
+    e3 = np.cross(e1, p[:, 2] - p[:, 0])
+    e1 = e1 / np.linalg.norm(e1, axis=1, keepdims=True)
+    e3 = e3 / np.linalg.norm(e3, axis=1, keepdims=True)
+    return np.stack([e1, np.cross(e3, e1), e3], axis=2)
+
+
+def _cluster_votes(pos, cluster: MarkerCluster, tol: float, chunk: int = 4000):
+    """Hypotheses of one cluster in every frame: (t, assignment (h, K) slots or -1, SSE of the fit m^2).
+
+    Each template triangle whose side lengths a frame's points show within `tol` places the
+    template (the triangles' frames, no fit); the other markers take the only point within `tol`
+    of their predictions; the hypotheses, once each, are then fitted by Kabsch and kept when every
+    marker lies within `tol` of the fit. Frames with a hypothesis of all K markers are not searched
+    with further triangles."""
+    tpl = cluster.template_m
+    K = tpl.shape[0]
+    T, P = pos.shape[:2]
+    d_t = np.linalg.norm(tpl[:, None] - tpl[None], axis=2)
+    hyp_t, hyp_a = [], []
+    for f0 in range(0, T, chunk):
+        q = pos[f0:f0 + chunk]
+        D = np.linalg.norm(q[:, :, None] - q[:, None], axis=3)
+        D = np.where(np.isfinite(D), D, np.inf)
+        complete = np.zeros(q.shape[0], bool)
+        for a, b, c in _triangles(tpl):
+            tt, ii, jj = np.nonzero((np.abs(D - d_t[a, b]) < tol) & ~complete[:, None, None])
+            keep = ii != jj
+            tt, ii, jj = tt[keep], ii[keep], jj[keep]
+            if not tt.size:
+                continue
+            ok_k = (np.abs(D[tt, jj] - d_t[b, c]) < tol) & (np.abs(D[tt, ii] - d_t[a, c]) < tol)   # (n, P)
+            r, kk = np.nonzero(ok_k)
+            tt, ii, jj = tt[r], ii[r], jj[r]
+            keep = (kk != ii) & (kk != jj)
+            tt, ii, jj, kk = tt[keep], ii[keep], jj[keep], kk[keep]
+            if not tt.size:
+                continue
+            n = tt.size
+            assign = np.full((n, K), -1)
+            assign[:, a], assign[:, b], assign[:, c] = ii, jj, kk
+            tri_q = q[tt[:, None], assign[:, [a, b, c]]]
+            tri_p = tpl[[a, b, c]]
+            R = _triad(tri_q) @ _triad(tri_p[None])[0].T
+            t = tri_q.mean(axis=1) - tri_p.mean(axis=0) @ np.swapaxes(R, 1, 2)
+            pred = np.einsum("nij,kj->nki", R, tpl) + t[:, None]                       # (n, K, 3)
+            rows = np.arange(n)
+            used = np.zeros((n, P), bool)
+            for col in (a, b, c):
+                used[rows, assign[:, col]] = True
+            for k in range(K):                   # the other markers: the only point within tol
+                if k in (a, b, c):
+                    continue
+                dk = np.linalg.norm(q[tt] - pred[:, k:k + 1], axis=2)                 # (n, P)
+                dk = np.where(used | ~np.isfinite(dk), np.inf, dk)
+                within = dk < tol
+                one = within.sum(axis=1) == 1
+                best = np.argmax(within, axis=1)
+                assign[one, k] = best[one]
+                used[rows[one], best[one]] = True
+            complete[tt[(assign >= 0).all(axis=1)]] = True
+            hyp_t.append(tt + f0)
+            hyp_a.append(assign)
+    if not hyp_t:
+        return np.zeros(0, int), np.zeros((0, K), int), np.zeros(0)
+    key = np.unique(np.column_stack([np.concatenate(hyp_t), np.concatenate(hyp_a)]), axis=0)
+    t, assign = key[:, 0], key[:, 1:]
+    n = t.size
+    w = (assign >= 0).astype(np.float64)
+    qq = pos[t[:, None], np.maximum(assign, 0)]
+    R, tr = _kabsch(np.broadcast_to(tpl, (n, K, 3)), qq, w)
+    pred = np.einsum("nij,kj->nki", R, tpl) + tr[:, None]
+    err = np.where(w > 0, np.linalg.norm(pred - qq, axis=2), 0.0)
+    good = err.max(axis=1) < tol
+    return t[good], assign[good], (err**2).sum(axis=1)[good]
+
+
+def _frame_votes(pos, tid_slot, clusters, label_index, tol, window: int = 25):
+    """Per slot (T, P): the label geometry votes for (-1 none) and the number of markers of the
+    winning hypothesis (0 none).
+
+    Per frame and cluster the hypotheses with the most markers compete. When they all place the
+    same points (a nearly symmetric template: only the labels differ), the frames whose points
+    belong to the same tracklets decide together: in each frame, the assignment of labels to
+    tracklets with the least fit error summed over the group's frames within `window` frames of it
+    (K tol^2 for a frame where it does not fit) wins, when it beats the next by 25 noise variances
+    (the noise variance from the fits themselves); else the frame names nothing. A window, not the
+    whole group, so that tracklets which swap markers halfway are judged on each side. Frames
+    whose best hypotheses place different points name nothing."""
+    T, P = pos.shape[:2]
+    vote = np.full((T, P), -1)
+    strength = np.zeros((T, P), int)
+    contested = np.zeros((T, P), bool)
+    for c in clusters:
+        t, assign, sse = _cluster_votes(pos, c, tol)
+        if not t.size:
+            continue
+        K = assign.shape[1]
+        found = (assign >= 0).sum(axis=1)
+        # keep, per frame, the hypotheses with the most markers (duplicates from several triangles once)
+        key = np.column_stack([t, assign])
+        key, first = np.unique(key, axis=0, return_index=True)
+        t, assign, sse, found = t[first], assign[first], sse[first], found[first]
+        top = np.zeros(T, int)
+        np.maximum.at(top, t, found)
+        best = found == top[t]
+        t, assign, sse, found = t[best], assign[best], sse[best], found[best]
+        # the same points in every hypothesis of a frame?
+        pts = np.sort(np.where(assign >= 0, assign, P), axis=1)
+        lead = np.r_[0, np.flatnonzero(t[1:] != t[:-1]) + 1]
+        grp = np.cumsum(np.r_[True, t[1:] != t[:-1]]) - 1
+        same = np.ones(lead.size, bool)
+        np.logical_and.at(same, grp, (pts == pts[lead[grp]]).all(axis=1))
+        keep = same[grp]
+        t, assign, sse, found, grp = t[keep], assign[keep], sse[keep], found[keep], grp[keep]
+        if not t.size:
+            continue
+        # labels -> tracklets; frames with the same tracklet set form a group, in which each
+        # assignment of labels to tracklets is a hypothesis, judged on a window of the group's frames
+        trk = np.where(assign >= 0, tid_slot[t[:, None], np.maximum(assign, 0)], -1)
+        members = np.sort(trk, axis=1)
+        _, gid = np.unique(members, axis=0, return_inverse=True)
+        gid = gid.ravel()
+        _, hid = np.unique(np.column_stack([gid, trk]), axis=0, return_inverse=True)
+        hid = hid.ravel()
+        gid_h = np.zeros(hid.max() + 1, int)
+        gid_h[hid] = gid
+        first_h = np.full(gid.max() + 1, np.iinfo(np.int64).max)
+        np.minimum.at(first_h, gid_h, np.arange(gid_h.size))
+        hl = hid - first_h[gid]                                   # hypothesis index within its group
+        n_h = np.bincount(gid_h)                                  # hypotheses per group
+        _, gf = np.unique(gid * T + t, return_inverse=True)       # group-frames, by group then time
+        gf = gf.ravel()
+        n_gf = gf.max() + 1
+        g_of_gf = np.zeros(n_gf, int)
+        g_of_gf[gf] = gid
+        H = int(hl.max()) + 1
+        cost = np.full((n_gf, H), K * tol**2)                     # absent in a frame: K tol^2
+        cost[gf, hl] = sse
+        valid = np.arange(H)[None] < n_h[g_of_gf][:, None]
+        cost[~valid] = 0.0
+        S = np.vstack([np.zeros((1, H)), np.cumsum(cost, axis=0)])
+        g_start = np.searchsorted(g_of_gf, g_of_gf, "left")
+        g_end = np.searchsorted(g_of_gf, g_of_gf, "right") - 1
+        i = np.arange(n_gf)
+        lo = np.maximum(i - window, g_start)
+        hi = np.minimum(i + window, g_end)
+        wsum = np.where(valid, S[hi + 1] - S[lo], np.inf)
+        best = np.argmin(wsum, axis=1)
+        w2 = wsum.copy()
+        w2[i, best] = np.inf
+        # the noise variance: the median over frames of the best fit's SSE per degree of freedom
+        dof = np.maximum(3 * found - 6, 1)
+        frame_best = np.full(T, np.inf)
+        np.minimum.at(frame_best, t, sse / dof)
+        sigma2 = max(float(np.median(frame_best[np.isfinite(frame_best)])), 1e-12)
+        decisive = (w2.min(axis=1) - wsum[i, best]) > 25.0 * sigma2
+        use = decisive[gf] & (hl == best[gf])
+        tw, aw, fw = t[use], assign[use], found[use]
+        for k in range(K):
+            has = aw[:, k] >= 0
+            ts, ss = tw[has], aw[has, k]
+            lab = label_index[c.labels[k]]
+            prev = vote[ts, ss]
+            stronger = fw[has] > strength[ts, ss]
+            tie = (fw[has] == strength[ts, ss]) & (prev >= 0) & (prev != lab)
+            contested[ts[tie], ss[tie]] = True
+            vote[ts[stronger], ss[stronger]] = lab
+            strength[ts[stronger], ss[stronger]] = fw[has][stronger]
+    vote[contested] = -1
+    strength[contested] = 0
+    return vote, strength
+
+
+# --- labelling ---------------------------------------------------------------------------------------
+
+@dataclass(frozen=True, eq=False)
+class Labelling:
+    """Labelled trajectories from unlabelled points.
+
+    Attributes
+    ----------
+    markers : MarkerTrajectories
+        (T, M, 3) metres, NaN where missing; ``residual`` the points' ray residuals (m), 0 where a
+        gap was filled from the rigid fit (C3D's "modelled" value).
+    camera_mask : (T, M) int
+        Bit c set when camera c saw the marker (0 where filled or missing).
+    filled : (T, M) bool
+        Samples filled from the cluster's rigid fit.
+    long_gaps : tuple of dict
+        Gaps longer than the fill limit, or without a rigid fit: label, first frame, frames.
+    point_label : (n,) int
+        Label index given to each input point (-1 none).
+    stats : dict
+        Counts: points, labelled, tracklets, swaps repaired, labels removed by the rigid check,
+        samples filled, long gaps.
+    """
+
+    markers: MarkerTrajectories
+    camera_mask: np.ndarray
+    filled: np.ndarray
+    long_gaps: tuple
+    point_label: np.ndarray
+    stats: dict = field(default_factory=dict)
+
+    def to_dict(self) -> dict:
+        xyz = self.markers.xyz
+        missing = ~np.isfinite(xyz[..., 0])
+        return dict(self.stats) | {
+            "labels": list(self.markers.labels), "n_frames": int(xyz.shape[0]),
+            "nan_share": float(missing.mean()) if missing.size else math.nan,
+            "nan_share_by_label": {s: float(missing[:, i].mean()) for i, s in enumerate(self.markers.labels)},
+            "long_gaps": [dict(g) for g in self.long_gaps]}
+
+
+def _runs(mask: np.ndarray):
+    """Runs of True in each column of mask (T, M): (column, start, length)."""
+    T, M = mask.shape
+    pad = np.zeros((T + 2, M), bool)
+    pad[1:-1] = mask
+    d = np.diff(pad.astype(np.int8), axis=0)
+    s_t, s_m = np.nonzero(d == 1)
+    e_t, e_m = np.nonzero(d == -1)
+    o1 = np.lexsort((s_t, s_m))
+    o2 = np.lexsort((e_t, e_m))
+    return s_m[o1], s_t[o1], e_t[o2] - s_t[o1]
+
+
+def fill_gaps(xyz: np.ndarray, labels: Sequence[str], clusters: Sequence[MarkerCluster], max_gap_frames: int):
+    """Fill gaps of at most `max_gap_frames` from the cluster's rigid fit of each frame.
+
+    Returns
+    -------
+    xyz : (T, M, 3) float
+        With the short gaps filled where three or more of the cluster's markers were present.
+    filled : (T, M) bool
+    long_gaps : list of dict
+        Gaps left (wholly or partly) open: label, start_frame, n_frames, reason (longer than the
+        limit, or frames without a rigid fit) and filled_frames.
+    """
+    xyz = np.array(xyz, dtype=np.float64)
+    missing = ~np.isfinite(xyz[..., 0])
+    pred, _, _ = fit_clusters(xyz, labels, clusters)
+    col, start, length = _runs(missing)
+    short = length <= max_gap_frames
+    fillable = missing & np.isfinite(pred[..., 0])
+    gap_id = np.full(missing.shape, -1)
+    for k in np.flatnonzero(short):                          # one slice per gap, not per frame
+        gap_id[start[k]:start[k] + length[k], col[k]] = k
+    fill = fillable & (gap_id >= 0)
+    xyz[fill] = pred[fill]
+    long_gaps = []
+    for k in range(col.size):
+        n_fill = int(fill[start[k]:start[k] + length[k], col[k]].sum())
+        if short[k] and n_fill == length[k]:
+            continue
+        long_gaps.append({"label": labels[col[k]], "start_frame": int(start[k]), "n_frames": int(length[k]),
+                          "reason": "longer than the fill limit" if not short[k] else "no rigid fit in some frames",
+                          "filled_frames": n_fill})
+    return xyz, fill, long_gaps
+
+
+def label_points(frame, p_world, clusters: Sequence[MarkerCluster], *, n_frames: int, rate_hz: float,
+                 first_frame: int = 0, residual_m=None, camera_mask=None, tol_m: float = 0.003,
+                 max_speed_m_s: float = 3.0, max_gap_s: float = 0.1, tracklet=None) -> Labelling:
+    """Label unlabelled 3D points with the clusters' markers (module docstring).
+
+    Parameters
+    ----------
+    frame : (n,) int
+        Frame of each point, 0..n_frames-1.
+    p_world : (n, 3) float
+        Points, metres (NaN rows are ignored).
+    clusters : sequence of MarkerCluster
+        Labels unique across clusters; every template asymmetric (:func:`cluster_symmetry`).
+    n_frames : int
+    rate_hz : float
+    first_frame : int
+        Frame index of frame 0 on the mocap clock (t = (first_frame + i) / rate_hz).
+    residual_m : (n,) float, optional
+        Each point's residual (ray distance), m.
+    camera_mask : (n,) int, optional
+        Each point's camera bits.
+    tol_m : float
+        Geometric tolerance: template distances, rigid-fit residuals, m.
+    max_speed_m_s : float
+        Fastest marker speed for linking.
+    max_gap_s : float
+        Longest gap filled from the rigid fit.
+    tracklet : (n,) int, optional
+        Tracklet ids from elsewhere (e.g. the unlabelled trajectories of another system's C3D, which
+        may hold swaps) instead of this module's linking.
+
+    Returns
+    -------
+    Labelling
+    """
+    frame = np.asarray(frame, dtype=np.int64)
+    p = np.asarray(p_world, dtype=np.float64)
+    if p.ndim != 2 or p.shape[1] != 3 or frame.shape != (p.shape[0],):
+        raise InputError(None, "p_world", "(n, 3) points with an (n,) frame index", f"shapes {p.shape}, {frame.shape}")
+    if frame.size and (frame.min() < 0 or frame.max() >= n_frames):
+        raise InputError(None, "frame", f"frames 0..{n_frames - 1}", f"{int(frame.min())}..{int(frame.max())}")
+    if not clusters:
+        raise InputError(None, "clusters", "at least one rigid cluster to label from", "none")
+    labels = [s for c in clusters for s in c.labels]
+    if len(set(labels)) != len(labels):
+        raise InputError(None, "clusters", "each label in one cluster", "a label in two clusters")
+    for c in clusters:
+        sym = cluster_symmetry(c, 2e-4)
+        if sym is not None:
+            raise InputError(None, f"cluster {c.name!r}", "a template whose markers geometry can tell apart",
+                             "a symmetric template (" + ", ".join(f"{c.labels[i]}->{c.labels[j]}" for i, j in
+                                                                   enumerate(sym) if i != j) + ")",
+                             hint="move a marker so that its distances to the others differ by a few mm")
+    label_index = {s: i for i, s in enumerate(labels)}
+    M = len(labels)
+    n = frame.size
+    res = np.zeros(n) if residual_m is None else np.asarray(residual_m, dtype=np.float64)
+    cmask = np.zeros(n, np.int64) if camera_mask is None else np.asarray(camera_mask, dtype=np.int64)
+    finite = np.isfinite(p).all(axis=1)
+    keep = np.flatnonzero(finite)
+    frame_k, p_k = frame[keep], p[keep]
+    pos, idx, slot = _padded(frame_k, p_k, n_frames)
+    if tracklet is None:
+        tid = link_points(frame_k, p_k, n_frames, rate_hz=rate_hz, max_speed_m_s=max_speed_m_s)
+    else:
+        tid = np.unique(np.asarray(tracklet, dtype=np.int64)[keep], return_inverse=True)[1].ravel()
+    tid_slot = np.full(idx.shape, -1)
+    tid_slot[frame_k, slot] = tid
+    vote, strength = _frame_votes(pos, tid_slot, clusters, label_index, tol_m)
+    v = vote[frame_k, slot]                                           # per point
+    s = strength[frame_k, slot]
+    # labels along tracklets: order points by (tracklet, frame); runs of equal votes
+    order = np.lexsort((frame_k, tid))
+    tv = v[order]
+    tt = tid[order]
+    voted = tv >= 0
+    lab = np.full(order.size, -1)
+    swaps = 0
+    if voted.any():
+        vi = np.flatnonzero(voted)
+        # previous and next vote within the same tracklet, for every point
+        prev_idx = np.full(order.size, -1)
+        prev_idx[vi] = vi
+        prev_idx = np.maximum.accumulate(prev_idx)
+        next_idx = np.full(order.size, order.size)
+        next_idx[vi] = vi
+        next_idx = np.minimum.accumulate(next_idx[::-1])[::-1]
+        pv = np.where(prev_idx >= 0, tv[np.maximum(prev_idx, 0)], -1)
+        pv = np.where((prev_idx >= 0) & (tt[np.maximum(prev_idx, 0)] == tt), pv, -1)
+        nv = np.where(next_idx < order.size, tv[np.minimum(next_idx, order.size - 1)], -1)
+        nv = np.where((next_idx < order.size) & (tt[np.minimum(next_idx, order.size - 1)] == tt), nv, -1)
+        # a point takes its own vote; unvoted points the vote on both sides when they agree, or
+        # the only one (tracklet ends)
+        lab = np.where(voted, tv, np.where((pv == nv) | (nv < 0), pv, np.where(pv < 0, nv, -1)))
+        # a lone vote against a long run is noise: a run of one vote between two runs of another
+        # label in the same tracklet is outvoted
+        w = np.flatnonzero(voted)
+        wl = tv[w]
+        wt = tt[w]
+        lone = np.zeros(w.size, bool)
+        if w.size >= 3:
+            lone[1:-1] = (wl[1:-1] != wl[:-2]) & (wl[:-2] == wl[2:]) & (wt[:-2] == wt[1:-1]) & (wt[1:-1] == wt[2:])
+            lab[w[lone]] = wl[:-2][lone[1:-1]] if lone[1:-1].any() else lab[w[lone]]
+        changes = (wl[1:] != wl[:-1]) & (wt[1:] == wt[:-1]) & ~lone[1:] & ~lone[:-1]
+        swaps = int(changes.sum())
+    point_label = np.full(keep.size, -1)
+    point_label[order] = lab
+    # one point per label and frame: geometry's vote first, else none
+    key = frame_k * M + point_label
+    lab_ok = point_label >= 0
+    uk, inv, cnt = np.unique(key[lab_ok], return_inverse=True, return_counts=True)
+    dup = cnt[inv] > 1
+    if dup.any():
+        li = np.flatnonzero(lab_ok)
+        own = (v[li] == point_label[li])
+        n_own = np.bincount(inv, own.astype(int), uk.size)
+        # keep a duplicated label on the point geometry voted for when it is the only such point
+        drop = dup & ~(own & (n_own[inv] == 1))
+        point_label[li[drop]] = -1
+    # the rigid check
+    xyz = np.full((n_frames, M, 3), np.nan)
+    src = np.full((n_frames, M), -1)
+    lab_ok = point_label >= 0
+    xyz[frame_k[lab_ok], point_label[lab_ok]] = p_k[lab_ok]
+    src[frame_k[lab_ok], point_label[lab_ok]] = keep[lab_ok]
+    removed = 0
+    for _ in range(3):
+        _, resid, npres = fit_clusters(xyz, labels, clusters)
+        bad = (resid > tol_m) & (npres >= 3)
+        # a marker of a fit that fails: drop the worst one of each failing frame and cluster, then refit
+        if bad.any():
+            worst = np.zeros_like(bad)
+            for c in clusters:
+                cols = np.array([label_index[s] for s in c.labels])
+                r = np.where(bad[:, cols], resid[:, cols], -1.0)
+                has = (r > 0).any(axis=1)
+                worst[np.flatnonzero(has), cols[np.argmax(r[has], axis=1)]] = True
+            xyz[worst] = np.nan
+            src[worst] = -1
+            removed += int(worst.sum())
+        else:
+            break
+    for c in clusters:                              # two markers present: their distance must fit
+        cols = np.array([label_index[s] for s in c.labels])
+        present = np.isfinite(xyz[:, cols, 0])
+        two = present.sum(axis=1) == 2
+        if not two.any():
+            continue
+        d_t = np.linalg.norm(c.template_m[:, None] - c.template_m[None], axis=2)
+        rows = np.flatnonzero(two)
+        pk = np.argsort(~present[rows], axis=1, kind="stable")[:, :2]
+        a, b = cols[pk[:, 0]], cols[pk[:, 1]]
+        d = np.linalg.norm(xyz[rows, a] - xyz[rows, b], axis=1)
+        bad = np.abs(d - d_t[pk[:, 0], pk[:, 1]]) > tol_m
+        for col in (a, b):
+            xyz[rows[bad], col[bad]] = np.nan
+            src[rows[bad], col[bad]] = -1
+        removed += 2 * int(bad.sum())
+    final_label = np.full(n, -1)
+    ok_src = src >= 0
+    final_label[src[ok_src]] = np.nonzero(ok_src)[1]
+    residual = np.full((n_frames, M), np.nan)
+    mask = np.zeros((n_frames, M), np.int64)
+    residual[ok_src] = res[src[ok_src]]
+    mask[ok_src] = cmask[src[ok_src]]
+    max_gap = int(round(max_gap_s * rate_hz))
+    xyz, filled, long_gaps = fill_gaps(xyz, labels, clusters, max_gap)
+    residual[filled] = 0.0
+    t = (first_frame + np.arange(n_frames)) / rate_hz
+    markers = MarkerTrajectories(t=t, xyz=xyz, labels=tuple(labels), rate_hz=rate_hz, residual=residual)
+    stats = {"n_points": int(finite.sum()), "n_labelled": int(ok_src.sum()),
+             "n_unlabelled": int(finite.sum() - ok_src.sum()), "n_tracklets": int(tid.max(initial=-1) + 1),
+             "swaps_repaired": swaps, "removed_by_rigid_check": removed, "gaps_filled": int(filled.sum()),
+             "n_long_gaps": len(long_gaps), "tol_m": tol_m, "max_gap_frames": max_gap}
+    return Labelling(markers=markers, camera_mask=mask, filled=filled, long_gaps=tuple(long_gaps),
+                     point_label=final_label, stats=stats)
