@@ -47,14 +47,14 @@ from scipy.sparse.csgraph import connected_components
 from ..errors import InputError
 from ..types import MarkerCluster, MarkerTrajectories
 
-__all__ = ["Labelling", "label_points", "link_points", "fit_clusters", "fill_gaps", "cluster_symmetry"]
+__all__ = ["Labelling", "label_points", "link_points", "fit_clusters", "fill_gaps", "cluster_symmetry", "rigid_fit"]
 
 
 # --- rigid fits, batched --------------------------------------------------------------------------
 
-def _kabsch(p: np.ndarray, q: np.ndarray, w: np.ndarray):
-    """Weighted rigid fits q ~ R p + t for a batch: p (n, K, 3) template, q (n, K, 3) points,
-    w (n, K) weights (0 = absent). Returns R (n, 3, 3), t (n, 3)."""
+def rigid_fit(p: np.ndarray, q: np.ndarray, w: np.ndarray):
+    """Weighted rigid fits q ~ R p + t for a batch (Kabsch 1976): p (n, K, 3) template, q (n, K, 3)
+    points (NaN where absent), w (n, K) weights (0 = absent). Returns R (n, 3, 3), t (n, 3)."""
     sw = w.sum(axis=1, keepdims=True)
     with np.errstate(invalid="ignore", divide="ignore"):
         pc = (w[..., None] * p).sum(axis=1) / sw
@@ -110,7 +110,7 @@ def fit_clusters(xyz: np.ndarray, labels: Sequence[str], clusters: Sequence[Mark
         ok = n >= 3
         if not ok.any():
             continue
-        R, t = _kabsch(np.broadcast_to(tpl, (int(ok.sum()),) + tpl.shape), q[ok], w[ok])
+        R, t = rigid_fit(np.broadcast_to(tpl, (int(ok.sum()),) + tpl.shape), q[ok], w[ok])
         pred = np.einsum("nij,kj->nki", R, tpl) + t[:, None]
         # a fit from markers on (nearly) one line leaves a rotation free: no fit
         centred = np.where(w[ok][..., None] > 0, tpl[None] - (w[ok][..., None] * tpl).sum(1, keepdims=True)
@@ -138,7 +138,7 @@ def cluster_symmetry(cluster: MarkerCluster, tol_m: float) -> tuple[int, ...] | 
             continue
         if np.abs(d[np.ix_(perm, perm)] - d).max() > 2 * tol_m:
             continue
-        R, t = _kabsch(tpl[None], tpl[list(perm)][None], np.ones((1, K)))
+        R, t = rigid_fit(tpl[None], tpl[list(perm)][None], np.ones((1, K)))
         rms = np.sqrt(np.mean(np.sum((tpl @ R[0].T + t[0] - tpl[list(perm)]) ** 2, axis=1)))
         if rms < tol_m:
             return perm
@@ -346,7 +346,7 @@ def _cluster_votes(pos, cluster: MarkerCluster, tol: float, chunk: int = 4000):
     n = t.size
     w = (assign >= 0).astype(np.float64)
     qq = pos[t[:, None], np.maximum(assign, 0)]
-    R, tr = _kabsch(np.broadcast_to(tpl, (n, K, 3)), qq, w)
+    R, tr = rigid_fit(np.broadcast_to(tpl, (n, K, 3)), qq, w)
     pred = np.einsum("nij,kj->nki", R, tpl) + tr[:, None]
     err = np.where(w > 0, np.linalg.norm(pred - qq, axis=2), 0.0)
     good = err.max(axis=1) < tol
