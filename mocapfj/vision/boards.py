@@ -4,7 +4,7 @@ an image with sub-pixel accuracy.
 Targets (docs/formats.md, docs/calibration.md):
 
 - **chessboard**: ``columns`` x ``rows`` inner corners, ``square_m``. Found by a lattice grown
-  from saddle points (:mod:`mocapfj.vision.corners`; it follows strong distortion and blur), else
+  from saddle points (:mod:`mocapfj.vision.lattice`; it follows strong distortion and blur), else
   OpenCV's classic detector, else its sector-based detector (Duda and Frese 2018), and in every
   case placed to sub-pixel by point symmetry. The whole board must be seen (a partial chessboard
   has no way to say which corners it shows).
@@ -44,8 +44,8 @@ from scipy.spatial import cKDTree
 
 from ..errors import InputError
 from ..types import BOARD_TYPES, Board
-from .corners import (grow_lattice, lattice_size, lattice_spacing, predict_nodes, refine_saddles, refine_square_corners,
-                      saddle_points, xjunction_test)
+from .corners import refine_saddles, refine_square_corners, saddle_points, xjunction_test
+from .lattice import grow_lattice, lattice_size, lattice_spacing, predict_nodes
 
 __all__ = ["BoardDetection", "APRILTAG_DICTIONARIES", "aruco_dictionary", "charuco_board", "board_points",
            "board_symmetry", "grey_image", "detect_board", "chessboard_size"]
