@@ -37,7 +37,7 @@ KINDS = ("control", "hysteresis", "stiffening", "time_delay", "stribeck", "frict
 
 
 def _bundles(kind: str, root: Path) -> tuple[Path, Path, Path]:
-    from bench_discover_grid import _models, _planted, _shift_controller
+    from bench_discover_grid import _models, _planted, _shift_controller, _with_mean
     from mocapfj.discover import write_model_file
     from mocapfj.io import read_json
     from mocapfj.synth.hinge import case_digest, first_row_case, write_hinge_bundle
@@ -47,7 +47,7 @@ def _bundles(kind: str, root: Path) -> tuple[Path, Path, Path]:
     if not (ctrl / "truth.json").exists() or read_json(ctrl / "truth.json")["case_sha256"] != case_digest(base):
         write_hinge_bundle(base, ctrl)
     t0 = read_json(ctrl / "truth.json")
-    case, delay = _planted(base, kind, t0["stats"], t0["noise"], 0.5, 1.0)
+    case, delay = _planted(base, kind, _with_mean(t0["stats"], ctrl), t0["noise"], 0.5, 1.0)
     out = []
     for name, c in (("ident", case), ("valid", replace(case, seed=case.seed + 1,
                                                         phases_rad=tuple(p + 1.0 for p in case.phases_rad)))):

@@ -19,7 +19,7 @@ from typing import Callable
 import numpy as np
 from scipy.optimize import minimize, minimize_scalar
 
-from ..dynamics import (AsymmetricCoulombViscous, Backlash, BoucWen, CoulombViscous, LinearSpring,
+from ..dynamics import (AsymmetricCoulombViscous, Backlash, BoucWen, CoulombViscous, CubicSpring, LinearSpring,
                         PositionDependent, PositionTorque, Stribeck, TransmissionError, shift_signal)
 from ..ident.conditioning import lowpass
 from ..ident.springs import bouc_wen_path
@@ -155,7 +155,10 @@ def stiffening(fam: Families, mask, others) -> Candidate | None:
     c, _ = _ls(basis, y, mask)
     K = k + c[:3]
     if not np.all(K[1:] > 0):
-        return None
+        # the three slopes of an odd spring do not fit deflections on one side of zero (a joint
+        # held up against gravity works around a few mrad of wind-up): a cubic spring about the
+        # deflection's true zero does
+        return _cubic_stiffening(fam, mask)
     if not K[0] >= 0.2 * K[1]:
         # a soft centre with almost no stiffness is what free play looks like; held at a fifth of
         # the middle slope, the spring stays a stiffening candidate for the simulation to judge
@@ -184,6 +187,63 @@ def stiffening(fam: Families, mask, others) -> Candidate | None:
         return Candidate("stiffening", "spring", params, 5, contribution, lambda m: m.with_(spring=el), loc, explain,
                          np.asarray(th, float), np.full(3, 0.1), build)
     return build(np.log(K / k))
+
+
+def _cubic_stiffening(fam: Families, mask) -> Candidate | None:
+    """A cubic spring k1 delta + k3 delta^3 (k3 > 0) about the deflection's own zero. The recorded
+    deflection's zero is not known (the joints stage cannot know the link angle's); the linear
+    nominal model set it where its spring carries the mean torque. A cubic spring carries it
+    elsewhere, so the spring torque is regressed on (d + s) and (d + s)^3 of the rebuilt deflection
+    d, k1 and k3 by least squares for each shift s, s by a scalar search (variable projection):
+    with no constant term, the mean torque fixes s."""
+    y, k = fam.r_s, fam.k
+    d = fam.d_hat
+    target = y + fam.lp(k * d)                          # the spring torque, as the residual filters it
+
+    def fit(s):
+        return _ls([fam.lp(d + s), fam.lp((d + s) ** 3)], target, mask)
+
+    def cost(s):                                        # a stiffening spring only (k1, k3 > 0)
+        (a, b), r = fit(s)
+        return r if a > 0 and b > 0 else np.inf
+
+    dk = d[fam.keep_s]
+    reach = 2.0 * abs(float(np.mean(dk))) + 5.0 * float(np.std(dk))
+    grid = np.linspace(-reach, reach, 41)
+    costs = np.array([cost(x) for x in grid])
+    if not np.isfinite(costs).any():
+        return None
+    s0 = float(grid[int(np.argmin(costs))])
+    step = grid[1] - grid[0]
+    with np.errstate(invalid="ignore", over="ignore"):     # an infinite cost beside the minimum
+        shift = float(minimize_scalar(cost, bounds=(s0 - step, s0 + step), method="bounded",
+                                      options={"xatol": 1e-9}).x)
+    if not np.isfinite(cost(shift)):
+        shift = s0
+    (k1, k3), _ = fit(shift)
+    k1, k3 = float(k1), float(k3)
+    if not (k1 > 0 and k3 > 0):
+        return None
+    contribution = fam.lp(k1 * (d + shift) + k3 * (d + shift) ** 3) - fam.lp(k * d)
+    contribution = contribution - np.mean((contribution - y)[mask])
+    span = float(np.percentile(np.abs(d[fam.keep_s] + shift), 95))
+
+    def build(th):
+        k1_, k3_ = float(k1 * np.exp(th[0])), float(k3 * np.exp(th[1]))
+        change = 300.0 * k3_ * span ** 2 / k1_
+        params = {"k1": k1_, "k3": k3_, "stiffness_change_pct_at_d95": change, "d95_rad": span}
+        loc = {"signal": "spring torque vs deflection", "where": "stiffness changes with the load",
+               "stiffness_change_pct_at_d95": change}
+
+        def explain(g):
+            return (f"The joint's stiffness rises with the load: the spring is k1 delta + k3 delta^3 with k1 "
+                    f"{k1_:.4g} N m/rad and k3 {k3_:.3g} N m/rad^3, {change:+.1f} % stiffness at the {1e3 * span:.3g} "
+                    f"mrad the joint reaches 5 % of the time. Harmonic drives stiffen as more flexspline teeth come "
+                    f"into contact; a cubic spring replaces the linear one.")
+        el = CubicSpring(k1=k1_, k3=k3_)
+        return Candidate("stiffening", "spring", params, 2, contribution, lambda m: m.with_(spring=el), loc, explain,
+                         np.asarray(th, float), np.array([0.1, 0.2]), build)
+    return build(np.zeros(2))
 
 
 def backlash(fam: Families, mask, others) -> Candidate | None:
@@ -336,6 +396,7 @@ def stribeck(fam: Families, mask, others) -> Candidate | None:
         return None
     qd = fam.qd_hat
     y = fam.r_l
+    eps = fam.model.friction.smoothing          # the nominal law's own smoothing (a tanh law stays one)
 
     def cols(vs):
         return [fam.lp(np.exp(-(qd / vs) ** 2) * np.sign(qd)), np.ones_like(y)]
@@ -367,7 +428,8 @@ def stribeck(fam: Families, mask, others) -> Candidate | None:
                     f"velocity of {vs:.3g} rad/s: the breakaway friction of the lubricated gear and bearing "
                     f"contacts (static {fc + peak:.2f} N m vs sliding {fc:.2f} N m, Oueslati et al. (2012), eq. 7).")
         return Candidate("stribeck", "link", params, 2, contribution,
-                         lambda m: m.with_(friction=Stribeck(fc=fc, fs=fc + peak, vs=vs, fv=fv)), loc, explain,
+                         lambda m: m.with_(friction=Stribeck(fc=fc, fs=fc + peak, vs=vs, fv=fv, smoothing=eps)), loc,
+                         explain,
                          np.asarray(th, float), np.array([0.5, 0.5]), build)
     return build(np.array([np.log(peak / fc if fc > 0 else peak), np.log(vs)]))
 
@@ -379,6 +441,7 @@ def friction_asymmetry(fam: Families, mask, others) -> Candidate | None:
     if cv is None:
         return None
     qd = fam.qd_hat
+    eps = fam.model.friction.smoothing          # the nominal law's own smoothing (a tanh law stays one)
     cols = [fam.lp(np.abs(np.sign(qd))), fam.lp(np.abs(qd))]
     c, _ = _ls(cols, fam.r_l, mask)
     dc, dv = float(c[0]), float(c[1])            # r_l = F_true - F_nominal = dc + dv |q'| while moving
@@ -387,7 +450,7 @@ def friction_asymmetry(fam: Families, mask, others) -> Candidate | None:
 
     def build(th):
         dc, dv = float(th[0]), float(th[1])
-        el = AsymmetricCoulombViscous(c_pos=fc + dc, c_neg=fc - dc, v_pos=fv + dv, v_neg=fv - dv)
+        el = AsymmetricCoulombViscous(c_pos=fc + dc, c_neg=fc - dc, v_pos=fv + dv, v_neg=fv - dv, smoothing=eps)
         params = {"c_pos": fc + dc, "c_neg": fc - dc, "v_pos": fv + dv, "v_neg": fv - dv}
         loc = {"signal": "link torque", "where": "sign of the velocity",
                "mean_difference_Nm": 2 * dc, "viscous_difference_Nm_s": 2 * dv}
