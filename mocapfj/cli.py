@@ -20,7 +20,6 @@ IDENTIFY_METHODS = ("motor_first", "two_step")   # mocapfj.ident.IDENTIFY_METHOD
 
 # Commands of the design that later versions fill in: (name, one-line help).
 PLANNED = [
-    ("triangulate", "2D detections to labelled 3D marker trajectories"),
     ("frf", "multisine frequency response estimation"),
     ("run", "the whole chain on a recording"),
     ("report", "a readable report of a run"),
@@ -41,6 +40,8 @@ def _inputs(args) -> list:
         if getattr(args, name, None):
             out.append(getattr(args, name))
     views = [p for paths in (getattr(args, "camera", None) or []) for p in paths]
+    if args.command == "triangulate":
+        views += [args.rig] + list(args.inputs) + list(args.clusters or [])
     return out + list(getattr(args, "recordings", None) or []) + list(getattr(args, "images", None) or []) + views
 
 
@@ -298,6 +299,28 @@ def _cmd_calibrate_rig(args) -> int:
     return 0
 
 
+def _cmd_triangulate(args) -> int:
+    from .pipeline.triangulate import run_triangulate
+
+    s = run_triangulate(args.inputs, args.rig, _work(args), clusters=args.clusters, rate_hz=args.rate,
+                        sigma_px=args.sigma_px, max_gap_s=args.max_gap, progress=not args.json)
+
+    def human(s):
+        rms = s["reprojection_rms_px"]
+        lines = [f"{len(s['labels'])} markers x {s['n_frames']} frames at {s['rate_hz']:.6g} Hz from {s['n_cameras']} cameras: "
+                 f"{s['points_per_frame']:.1f} points per frame, reprojection RMS "
+                 + (f"{rms:.3f} px" if rms is not None else "n/a") + f", {100 * s['nan_share']:.1f} % NaN",
+                 f"  {s['n_unseen']} points seen by fewer than 2 cameras, {s['n_rejected']} rejected by the robust "
+                 f"views, {s['n_nonfinite_ignored']} non-finite detections ignored",
+                 f"  {s['gaps_filled']} samples filled from the rigid fit, {s['swaps_repaired']} swaps repaired, "
+                 f"{s.get('n_long_gaps', 0)} gaps left open"]
+        lines.append(f"  wrote {args.out} ({', '.join(s['files'].values())})")
+        return "\n".join(lines)
+
+    _emit(args, s, human)
+    return 0
+
+
 def _cmd_inspect(args) -> int:
     from .pipeline import inspect_path
 
@@ -416,6 +439,21 @@ def build_parser() -> argparse.ArgumentParser:
     cr.add_argument("--every", type=int, default=1, help="use every N-th video frame (default 1)")
     cr.add_argument("--json", action="store_true", help="print a JSON summary on stdout")
     cr.set_defaults(func=_cmd_calibrate_rig)
+
+    tr = sub.add_parser("triangulate", help="2D detections to labelled 3D marker trajectories (C3D)",
+                        description="DETECTIONS: a CSV with frame, camera, x_px, y_px[, point_id], or one video, "
+                                    "image directory or image per camera of the rig, in camera order.")
+    tr.add_argument("inputs", nargs="+", metavar="DETECTIONS", help="detections CSV, or each camera's video/images")
+    tr.add_argument("--rig", required=True, help="rig TOML (anipose-compatible, docs/formats.md)")
+    tr.add_argument("--clusters", action="append", default=None, metavar="CLUSTERS",
+                    help="clusters file (mocapfj.clusters/1) or joint calibration (mocapfj.joint/1); repeatable")
+    tr.add_argument("--out", required=True, help="output directory")
+    tr.add_argument("--rate", type=float, default=None, help="frame rate, Hz (required for a CSV or images)")
+    tr.add_argument("--sigma-px", type=float, default=None,
+                    help="pixel noise SD (default: the rig's sigma_px, else from the residuals)")
+    tr.add_argument("--max-gap", type=float, default=0.1, help="longest gap filled from the rigid fit, s (default 0.1)")
+    tr.add_argument("--json", action="store_true", help="print a JSON summary on stdout")
+    tr.set_defaults(func=_cmd_triangulate)
 
     i = sub.add_parser("inspect", help="check and summarise a recording bundle or a C3D/TRC file")
     i.add_argument("recording", help="bundle directory, recording.toml, or marker file")

@@ -354,7 +354,7 @@ def _point_block(raw: bytes, h: _Header, start: int, n_frames: int, words: int, 
     return vals.reshape(n_frames, words)[:, :4 * h.n_points].reshape(n_frames, h.n_points, 4)
 
 
-def write_c3d(path: str | os.PathLike[str], markers: MarkerTrajectories) -> None:
+def write_c3d(path: str | os.PathLike[str], markers: MarkerTrajectories, camera_mask=None) -> None:
     """Write marker trajectories as a C3D file (float storage, mm, POINT:SCALE = -0.01), atomically.
 
     Parameters
@@ -365,6 +365,10 @@ def write_c3d(path: str | os.PathLike[str], markers: MarkerTrajectories) -> None
         Residuals (metres) are stored to 0.01 mm when all are at most 2.55 mm; otherwise the
         scale widens to max residual / 255 so that none is clipped. Samples without a residual
         are stored with residual 0.
+    camera_mask : (T, M) int, optional
+        Cameras that saw each sample, bit c for camera c; stored in the high byte of the fourth
+        word (C3D user guide: bits 0-6 for the first seven cameras, so cameras from 7 on are not
+        representable and left out).
     """
     import ezc3d
 
@@ -405,6 +409,11 @@ def write_c3d(path: str | os.PathLike[str], markers: MarkerTrajectories) -> None
         c.add_parameter("POINT", "LONG_FRAMES", float(n_frames))
 
     res_byte = np.clip(np.round(res_mm / abs(np.float32(scale))), 0, 255)
+    if camera_mask is not None:
+        cm = np.asarray(camera_mask, dtype=np.int64)
+        if cm.shape != (n_frames, n_markers):
+            raise InputError(path, "camera_mask", f"shape ({n_frames}, {n_markers})", f"shape {cm.shape}")
+        res_byte = res_byte + 256.0 * (cm & 0x7F)
     fourth = np.where(invalid, -1.0, res_byte).astype("<f4")
 
     path = Path(path)

@@ -6,6 +6,7 @@
 - :mod:`.discover`: ``discover`` (discovery.json, model.toml, residuals.csv).
 - :mod:`.calibrate`: ``calibrate-camera`` (camera.toml, intrinsics.json, detections.json, coverage.png) and
   ``calibrate-rig`` (rig.toml, calibrate_rig.json, detections.csv).
+- :mod:`.triangulate`: ``triangulate`` (markers.c3d, triangulate.json, tag_poses.csv).
 """
 
 from .core import (default_scenario, inspect_path, run_demo, run_joints, run_simulate, summarize_markers,
@@ -13,7 +14,9 @@ from .core import (default_scenario, inspect_path, run_demo, run_joints, run_sim
 from .discover import run_discover
 from .identify import run_identify, write_tables
 from .calibrate import run_calibrate_camera, run_calibrate_rig
+from .triangulate import run_triangulate
 
 __all__ = ["default_scenario", "inspect_path", "run_demo", "run_joints", "run_simulate", "summarize_markers",
            "summarize_recording", "write_joints", "run_discover", "run_identify", "write_tables"]
 __all__ += ["run_calibrate_camera", "run_calibrate_rig"]
+__all__ += ["run_triangulate"]

@@ -243,7 +243,8 @@ def match_detections(rig: Rig, det: Detections, *, sigma_px: float | None = None
     det : Detections
         Blobs per frame and camera (point_id ignored).
     sigma_px : float, optional
-        Pixel noise SD; default the rig's ``sigma_px`` or 0.3 px.
+        Pixel noise SD; default the rig's ``sigma_px``, else 0.3 px for the gates and the residuals'
+        estimate for the covariance (:func:`mocapfj.vision.triangulate.triangulate`).
     epipolar_px : float, optional
         Largest epipolar distance of a pair, px; default max(5 sigma, 1 px).
     gate_px : float, optional
@@ -345,7 +346,7 @@ def match_detections(rig: Rig, det: Detections, *, sigma_px: float | None = None
         has = sets[c] >= 0
         xy[c, has] = pool.xy[c][sets[c, has]]
         rows[c, has] = pool.rows[c][sets[c, has]]
-    tri = triangulate(rig, xy, sigma_px=sig)
+    tri = triangulate(rig, xy, sigma_px=sigma_px)
     rows = np.where(tri.used, rows, -1)
     stats["n_assigned"] = int((rows >= 0).sum())
     stats["n_candidates"] = int(np.isfinite(tri.p_world[:, 0]).sum())

@@ -550,7 +550,9 @@ def label_points(frame, p_world, clusters: Sequence[MarkerCluster], *, n_frames:
     p_world : (n, 3) float
         Points, metres (NaN rows are ignored).
     clusters : sequence of MarkerCluster
-        Labels unique across clusters; every template asymmetric (:func:`cluster_symmetry`).
+        Labels unique across clusters. A template that a relabelling maps onto itself within 50 um
+        is refused (:func:`cluster_symmetry`); one within `tol_m` is labelled over time (frames of
+        a tracklet group decide together) and named in ``stats["nearly_symmetric_clusters"]``.
     n_frames : int
     rate_hz : float
     first_frame : int
@@ -584,8 +586,9 @@ def label_points(frame, p_world, clusters: Sequence[MarkerCluster], *, n_frames:
     labels = [s for c in clusters for s in c.labels]
     if len(set(labels)) != len(labels):
         raise InputError(None, "clusters", "each label in one cluster", "a label in two clusters")
+    nearly = [c.name for c in clusters if cluster_symmetry(c, tol_m) is not None]
     for c in clusters:
-        sym = cluster_symmetry(c, 2e-4)
+        sym = cluster_symmetry(c, 5e-5)
         if sym is not None:
             raise InputError(None, f"cluster {c.name!r}", "a template whose markers geometry can tell apart",
                              "a symmetric template (" + ", ".join(f"{c.labels[i]}->{c.labels[j]}" for i, j in
@@ -711,6 +714,7 @@ def label_points(frame, p_world, clusters: Sequence[MarkerCluster], *, n_frames:
     stats = {"n_points": int(finite.sum()), "n_labelled": int(ok_src.sum()),
              "n_unlabelled": int(finite.sum() - ok_src.sum()), "n_tracklets": int(tid.max(initial=-1) + 1),
              "swaps_repaired": swaps, "removed_by_rigid_check": removed, "gaps_filled": int(filled.sum()),
-             "n_long_gaps": len(long_gaps), "tol_m": tol_m, "max_gap_frames": max_gap}
+             "n_long_gaps": len(long_gaps), "tol_m": tol_m, "max_gap_frames": max_gap,
+             "nearly_symmetric_clusters": nearly}
     return Labelling(markers=markers, camera_mask=mask, filled=filled, long_gaps=tuple(long_gaps),
                      point_label=final_label, stats=stats)
