@@ -37,6 +37,7 @@ from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 
 import numpy as np
+from scipy.stats import chi2 as chi2_dist
 
 from ..errors import InputError
 from ..types import Camera, Rig
@@ -452,6 +453,10 @@ class Triangulation:
         agreed, or two hypotheses with other views fitted about equally well (``n_ambiguous`` of
         them): a point is left out rather than placed on a guess.
     n_ambiguous : int
+        Of those, points where two camera subsets with different views fitted about equally well.
+    n_inconsistent : int
+        Points whose views each passed the gate but whose chi-square (with sigma) lies beyond its
+        1e-6 tail: NaN (counted in ``n_rejected``).
     n_nonfinite : int
         Non-finite pixel observations ignored.
     n_outlier_views : int
@@ -470,6 +475,7 @@ class Triangulation:
     n_unseen: int
     n_rejected: int
     n_ambiguous: int
+    n_inconsistent: int
     n_nonfinite: int
     n_outlier_views: int
     table_error_px: float
@@ -494,7 +500,7 @@ class Triangulation:
         ok = np.isfinite(self.p_world[:, 0])
         sd = self.sd_m[ok]
         return {"n_points": int(ok.size), "n_triangulated": int(ok.sum()), "n_unseen": self.n_unseen,
-                "n_rejected": self.n_rejected, "n_ambiguous": self.n_ambiguous,
+                "n_rejected": self.n_rejected, "n_ambiguous": self.n_ambiguous, "n_inconsistent": self.n_inconsistent,
                 "n_nonfinite": self.n_nonfinite, "n_outlier_views": self.n_outlier_views,
                 "reprojection_rms_px": self.reprojection_rms_px(), "sigma_px": self.sigma_px,
                 "sigma_source": self.sigma_source, "views_mean": float(self.n_views[ok].mean()) if ok.any() else math.nan,
@@ -548,13 +554,12 @@ def triangulate(rig: Rig, xy_px, *, sigma_px=None, robust: bool = True, gate_px:
     params = rig_parameters(rig)
     use = valid & (valid.sum(axis=0) >= 2)[None]
     p, H, res, z = _gauss_newton(params, xy, use, w, p, iterations)
+    guess = 1.0
+    if source == "residuals":               # a robust first guess: 1.4826 x the median absolute residual
+        r_used = np.abs(res[use & (use.sum(axis=0) >= 3)[None]])
+        guess = 1.4826 * float(np.median(r_used)) if r_used.size else 0.3
     if gate_px is None:
-        if source == "residuals":           # a robust first guess: 1.4826 x the median absolute residual
-            r_used = np.abs(res[use & (use.sum(axis=0) >= 3)[None]])
-            guess = 1.4826 * float(np.median(r_used)) if r_used.size else 0.3
-            gate_px = max(5.0 * guess, 1.0)
-        else:
-            gate_px = max(5.0 * scalar_sigma, 1.0)
+        gate_px = max(5.0 * (guess if source == "residuals" else scalar_sigma), 1.0)
     n_out = n_ambiguous = 0
     n_seen2 = int((valid.sum(axis=0) >= 2).sum())
     if robust:
@@ -584,6 +589,18 @@ def triangulate(rig: Rig, xy_px, *, sigma_px=None, robust: bool = True, gate_px:
             use[:, idx] = sub_use
     use &= np.isfinite(p[:, 0])[None]
     ok = use.sum(axis=0) >= 2
+    n_inconsistent = 0
+    if robust:
+        # views that each pass the gate but together do not fit (a blob of another marker near this
+        # one's projection): the point's chi-square beyond its 1e-6 tail is left NaN
+        chi2 = np.where(use, w * (res**2).sum(axis=2), 0.0).sum(axis=0) / guess**2
+        dof = 2 * use.sum(axis=0) - 3
+        limit = np.full(N, np.inf)
+        limit[dof >= 1] = chi2_dist.isf(1e-6, dof[dof >= 1])
+        bad = ok & (chi2 > limit)
+        n_inconsistent = int(bad.sum())
+        ok &= ~bad
+        use &= ok[None]
     p[~ok] = np.nan
     if source == "residuals":
         dof = 2 * use.sum() - 3 * ok.sum()
@@ -602,7 +619,7 @@ def triangulate(rig: Rig, xy_px, *, sigma_px=None, robust: bool = True, gate_px:
     ray[~ok] = np.nan
     return Triangulation(p_world=p, cov=cov, used=use, residual_px=res, ray_residual_m=ray,
                          sigma_px=scalar_sigma, sigma_source=source, n_unseen=N - n_seen2,
-                         n_rejected=int(n_seen2 - ok.sum()), n_ambiguous=n_ambiguous,
+                         n_rejected=int(n_seen2 - ok.sum()), n_ambiguous=n_ambiguous, n_inconsistent=n_inconsistent,
                          n_nonfinite=n_bad, n_outlier_views=n_out,
                          table_error_px=max(t.max_error_px for t in tables), extra={})
 
