@@ -346,7 +346,7 @@ def match_detections(rig: Rig, det: Detections, *, sigma_px: float | None = None
         has = sets[c] >= 0
         xy[c, has] = pool.xy[c][sets[c, has]]
         rows[c, has] = pool.rows[c][sets[c, has]]
-    tri = triangulate(rig, xy, sigma_px=sigma_px)
+    tri = triangulate(rig, xy, sigma_px=sigma_px, iterations=1)       # the linear start is close
     rows = np.where(tri.used, rows, -1)
     stats["n_assigned"] = int((rows >= 0).sum())
     stats["n_candidates"] = int(np.isfinite(tri.p_world[:, 0]).sum())

@@ -70,7 +70,7 @@ def rigid_fit(p: np.ndarray, q: np.ndarray, w: np.ndarray):
     return R, t
 
 
-def fit_clusters(xyz: np.ndarray, labels: Sequence[str], clusters: Sequence[MarkerCluster]):
+def fit_clusters(xyz: np.ndarray, labels: Sequence[str], clusters: Sequence[MarkerCluster], frames=None):
     """Per frame and cluster, the rigid fit of the template to the present markers.
 
     Parameters
@@ -79,6 +79,8 @@ def fit_clusters(xyz: np.ndarray, labels: Sequence[str], clusters: Sequence[Mark
         Labelled markers, NaN where missing.
     labels : M str
     clusters : sequence of MarkerCluster
+    frames : (T,) bool, optional
+        Fit only these frames (the others' outputs are NaN, n_present still counted).
 
     Returns
     -------
@@ -108,16 +110,20 @@ def fit_clusters(xyz: np.ndarray, labels: Sequence[str], clusters: Sequence[Mark
         n = w.sum(axis=1).astype(int)
         n_present[:, idx] = n[:, None]
         ok = n >= 3
+        if frames is not None:
+            ok &= np.asarray(frames, dtype=bool)
         if not ok.any():
             continue
         R, t = rigid_fit(np.broadcast_to(tpl, (int(ok.sum()),) + tpl.shape), q[ok], w[ok])
         pred = np.einsum("nij,kj->nki", R, tpl) + t[:, None]
-        # a fit from markers on (nearly) one line leaves a rotation free: no fit
-        centred = np.where(w[ok][..., None] > 0, tpl[None] - (w[ok][..., None] * tpl).sum(1, keepdims=True)
-                           / w[ok].sum(1)[:, None, None], 0.0)
-        sv = np.linalg.svd(centred, compute_uv=False)
-        line = sv[:, 1] < 1e-3 * np.maximum(sv[:, 0], 1e-12)
-        pred[line] = np.nan
+        # a fit from markers on (nearly) one line leaves a rotation free: no fit (judged once per
+        # pattern of present markers)
+        pattern = (w[ok] > 0) @ (1 << np.arange(len(have)))
+        for code in np.unique(pattern):
+            sel = tpl[[(code >> k) & 1 == 1 for k in range(len(have))]]
+            sv = np.linalg.svd(sel - sel.mean(axis=0), compute_uv=False)
+            if sv[1] < 1e-3 * max(sv[0], 1e-12):
+                pred[pattern == code] = np.nan
         rows = np.flatnonzero(ok)
         predicted[rows[:, None], idx[None]] = pred
         residual[rows[:, None], idx[None]] = np.linalg.norm(pred - q[ok], axis=2)
@@ -283,7 +289,38 @@ def _triad(p: np.ndarray) -> np.ndarray:
     return np.stack([e1, np.cross(e3, e1), e3], axis=2)
 
 
-def _cluster_votes(pos, cluster: MarkerCluster, tol: float, chunk: int = 4000):
+class _PairIndex:
+    """Distances between the points of every frame, and the pairs of each frame sorted by distance
+    (one sort for all frames: key = frame * 16 m + distance), for finding a template's side lengths."""
+
+    def __init__(self, pos: np.ndarray, chunk: int = 4000):
+        T, P = pos.shape[:2]
+        self.T, self.P = T, P
+        D = np.empty((T, P, P))
+        for f0 in range(0, T, chunk):
+            q = pos[f0:f0 + chunk]
+            diff = q[:, :, None] - q[:, None]
+            D[f0:f0 + chunk] = np.sqrt(np.einsum("tijk,tijk->tij", diff, diff))
+        D[~np.isfinite(D)] = np.inf
+        self.D = D
+        iu, ju = np.triu_indices(P, 1)
+        d = D[:, iu, ju]
+        t, k = np.nonzero(d < 15.0)
+        key = t * 16.0 + d[t, k]
+        order = np.argsort(key, kind="stable")
+        self.key, self.t, self.i, self.j = key[order], t[order], iu[k[order]], ju[k[order]]
+
+    def near(self, length: float, tol: float, frames: np.ndarray):
+        """(t, i, j), both orders, of the pairs of `frames` at `length` +- tol."""
+        lo = np.searchsorted(self.key, frames * 16.0 + length - tol, "left")
+        hi = np.searchsorted(self.key, frames * 16.0 + length + tol, "right")
+        cnt = hi - lo
+        idx = np.repeat(lo - np.cumsum(np.r_[0, cnt[:-1]]), cnt) + np.arange(int(cnt.sum()))
+        t, i, j = self.t[idx], self.i[idx], self.j[idx]
+        return np.r_[t, t], np.r_[i, j], np.r_[j, i]
+
+
+def _cluster_votes(index: _PairIndex, pos, cluster: MarkerCluster, tol: float):
     """Hypotheses of one cluster in every frame: (t, assignment (h, K) slots or -1, SSE of the fit m^2).
 
     Each template triangle whose side lengths a frame's points show within `tol` places the
@@ -294,51 +331,46 @@ def _cluster_votes(pos, cluster: MarkerCluster, tol: float, chunk: int = 4000):
     tpl = cluster.template_m
     K = tpl.shape[0]
     T, P = pos.shape[:2]
+    D = index.D
     d_t = np.linalg.norm(tpl[:, None] - tpl[None], axis=2)
     hyp_t, hyp_a = [], []
-    for f0 in range(0, T, chunk):
-        q = pos[f0:f0 + chunk]
-        D = np.linalg.norm(q[:, :, None] - q[:, None], axis=3)
-        D = np.where(np.isfinite(D), D, np.inf)
-        complete = np.zeros(q.shape[0], bool)
-        for a, b, c in _triangles(tpl):
-            tt, ii, jj = np.nonzero((np.abs(D - d_t[a, b]) < tol) & ~complete[:, None, None])
-            keep = ii != jj
-            tt, ii, jj = tt[keep], ii[keep], jj[keep]
-            if not tt.size:
+    complete = np.zeros(T, bool)
+    for a, b, c in _triangles(tpl):
+        tt, ii, jj = index.near(d_t[a, b], tol, np.flatnonzero(~complete))
+        if not tt.size:
+            continue
+        ok_k = (np.abs(D[tt, jj] - d_t[b, c]) < tol) & (np.abs(D[tt, ii] - d_t[a, c]) < tol)   # (n, P)
+        r, kk = np.nonzero(ok_k)
+        tt, ii, jj = tt[r], ii[r], jj[r]
+        keep = (kk != ii) & (kk != jj)
+        tt, ii, jj, kk = tt[keep], ii[keep], jj[keep], kk[keep]
+        if not tt.size:
+            continue
+        n = tt.size
+        assign = np.full((n, K), -1)
+        assign[:, a], assign[:, b], assign[:, c] = ii, jj, kk
+        tri_q = pos[tt[:, None], assign[:, [a, b, c]]]
+        tri_p = tpl[[a, b, c]]
+        R = _triad(tri_q) @ _triad(tri_p[None])[0].T
+        t = tri_q.mean(axis=1) - tri_p.mean(axis=0) @ np.swapaxes(R, 1, 2)
+        pred = np.einsum("nij,kj->nki", R, tpl) + t[:, None]                       # (n, K, 3)
+        rows = np.arange(n)
+        used = np.zeros((n, P), bool)
+        for col in (a, b, c):
+            used[rows, assign[:, col]] = True
+        for k in range(K):                   # the other markers: the only point within tol
+            if k in (a, b, c):
                 continue
-            ok_k = (np.abs(D[tt, jj] - d_t[b, c]) < tol) & (np.abs(D[tt, ii] - d_t[a, c]) < tol)   # (n, P)
-            r, kk = np.nonzero(ok_k)
-            tt, ii, jj = tt[r], ii[r], jj[r]
-            keep = (kk != ii) & (kk != jj)
-            tt, ii, jj, kk = tt[keep], ii[keep], jj[keep], kk[keep]
-            if not tt.size:
-                continue
-            n = tt.size
-            assign = np.full((n, K), -1)
-            assign[:, a], assign[:, b], assign[:, c] = ii, jj, kk
-            tri_q = q[tt[:, None], assign[:, [a, b, c]]]
-            tri_p = tpl[[a, b, c]]
-            R = _triad(tri_q) @ _triad(tri_p[None])[0].T
-            t = tri_q.mean(axis=1) - tri_p.mean(axis=0) @ np.swapaxes(R, 1, 2)
-            pred = np.einsum("nij,kj->nki", R, tpl) + t[:, None]                       # (n, K, 3)
-            rows = np.arange(n)
-            used = np.zeros((n, P), bool)
-            for col in (a, b, c):
-                used[rows, assign[:, col]] = True
-            for k in range(K):                   # the other markers: the only point within tol
-                if k in (a, b, c):
-                    continue
-                dk = np.linalg.norm(q[tt] - pred[:, k:k + 1], axis=2)                 # (n, P)
-                dk = np.where(used | ~np.isfinite(dk), np.inf, dk)
-                within = dk < tol
-                one = within.sum(axis=1) == 1
-                best = np.argmax(within, axis=1)
-                assign[one, k] = best[one]
-                used[rows[one], best[one]] = True
-            complete[tt[(assign >= 0).all(axis=1)]] = True
-            hyp_t.append(tt + f0)
-            hyp_a.append(assign)
+            dk = np.linalg.norm(pos[tt] - pred[:, k:k + 1], axis=2)                 # (n, P)
+            dk = np.where(used | ~np.isfinite(dk), np.inf, dk)
+            within = dk < tol
+            one = within.sum(axis=1) == 1
+            best = np.argmax(within, axis=1)
+            assign[one, k] = best[one]
+            used[rows[one], best[one]] = True
+        complete[tt[(assign >= 0).all(axis=1)]] = True
+        hyp_t.append(tt)
+        hyp_a.append(assign)
     if not hyp_t:
         return np.zeros(0, int), np.zeros((0, K), int), np.zeros(0)
     key = np.unique(np.column_stack([np.concatenate(hyp_t), np.concatenate(hyp_a)]), axis=0)
@@ -369,8 +401,9 @@ def _frame_votes(pos, tid_slot, clusters, label_index, tol, window: int = 25):
     vote = np.full((T, P), -1)
     strength = np.zeros((T, P), int)
     contested = np.zeros((T, P), bool)
+    index = _PairIndex(pos)
     for c in clusters:
-        t, assign, sse = _cluster_votes(pos, c, tol)
+        t, assign, sse = _cluster_votes(index, pos, c, tol)
         if not t.size:
             continue
         K = assign.shape[1]
@@ -518,7 +551,7 @@ def fill_gaps(xyz: np.ndarray, labels: Sequence[str], clusters: Sequence[MarkerC
     """
     xyz = np.array(xyz, dtype=np.float64)
     missing = ~np.isfinite(xyz[..., 0])
-    pred, _, _ = fit_clusters(xyz, labels, clusters)
+    pred, _, _ = fit_clusters(xyz, labels, clusters, frames=missing.any(axis=1))
     col, start, length = _runs(missing)
     short = length <= max_gap_frames
     fillable = missing & np.isfinite(pred[..., 0])
@@ -667,22 +700,23 @@ def label_points(frame, p_world, clusters: Sequence[MarkerCluster], *, n_frames:
     xyz[frame_k[lab_ok], point_label[lab_ok]] = p_k[lab_ok]
     src[frame_k[lab_ok], point_label[lab_ok]] = keep[lab_ok]
     removed = 0
+    todo = np.ones(n_frames, bool)
     for _ in range(3):
-        _, resid, npres = fit_clusters(xyz, labels, clusters)
+        _, resid, npres = fit_clusters(xyz, labels, clusters, frames=todo)
         bad = (resid > tol_m) & (npres >= 3)
         # a marker of a fit that fails: drop the worst one of each failing frame and cluster, then refit
-        if bad.any():
-            worst = np.zeros_like(bad)
-            for c in clusters:
-                cols = np.array([label_index[s] for s in c.labels])
-                r = np.where(bad[:, cols], resid[:, cols], -1.0)
-                has = (r > 0).any(axis=1)
-                worst[np.flatnonzero(has), cols[np.argmax(r[has], axis=1)]] = True
-            xyz[worst] = np.nan
-            src[worst] = -1
-            removed += int(worst.sum())
-        else:
+        if not bad.any():
             break
+        worst = np.zeros_like(bad)
+        for c in clusters:
+            cols = np.array([label_index[s] for s in c.labels])
+            r = np.where(bad[:, cols], resid[:, cols], -1.0)
+            has = (r > 0).any(axis=1)
+            worst[np.flatnonzero(has), cols[np.argmax(r[has], axis=1)]] = True
+        xyz[worst] = np.nan
+        src[worst] = -1
+        removed += int(worst.sum())
+        todo = worst.any(axis=1)
     for c in clusters:                              # two markers present: their distance must fit
         cols = np.array([label_index[s] for s in c.labels])
         present = np.isfinite(xyz[:, cols, 0])
