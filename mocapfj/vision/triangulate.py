@@ -37,7 +37,6 @@ from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.stats import chi2 as chi2_dist
 
 from ..errors import InputError
 from ..types import Camera, Rig
@@ -591,6 +590,7 @@ def triangulate(rig: Rig, xy_px, *, sigma_px=None, robust: bool = True, gate_px:
     ok = use.sum(axis=0) >= 2
     n_inconsistent = 0
     if robust:
+        from scipy.stats import chi2 as chi2_dist
         # views that each pass the gate but together do not fit (a blob of another marker near this
         # one's projection): the point's chi-square beyond its 1e-6 tail is left NaN
         chi2 = np.where(use, w * (res**2).sum(axis=2), 0.0).sum(axis=0) / guess**2
