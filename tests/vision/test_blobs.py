@@ -26,7 +26,7 @@ def clip():
     """Markers moving in front of a ring camera, rendered as anti-aliased discs (radius 4 px)."""
     rng = np.random.default_rng(1)
     cam = ring_rig(4, rng=np.random.default_rng(0)).cameras[0]
-    p = rng.uniform([-0.6, -0.6, 0.6], [0.6, 0.6, 1.8], (1, 25, 3)) + np.cumsum(rng.normal(0, 0.003, (12, 25, 3)), 0)
+    p = rng.uniform([-0.6, -0.6, 0.6], [0.6, 0.6, 1.8], (1, 25, 3)) + np.cumsum(rng.normal(0, 0.003, (8, 25, 3)), 0)
     return render_blob_clip(cam, p, radius_px=4.0, noise_sd=1.0, supersample=16, rng=rng)
 
 

@@ -58,17 +58,17 @@ def test_real_photos_against_the_apriltag_library(realdata):
 
 
 def test_rendered_tags_against_their_truth():
-    """A 3 x 2 grid of 40 mm tag36h11 tags rendered through a distorted camera at three poses
+    """A 3 x 2 grid of 40 mm tag36h11 tags rendered through a distorted camera at two poses
     (blur 0.7 px, noise 2 grey levels): every tag found, corners within 0.25 px RMS of the truth."""
     board = Board("aprilgrid", 3, 2, tag_m=0.04, spacing_m=0.012, family="tag36h11")
     cam = look_at_camera("c", [0, 0, 0], [0, 0, 1], up_world=[0, -1, 0], fx=900, size=(800, 600),
                          dist=(-0.05, 0.01, 0, 0, 0))
     rng = np.random.default_rng(0)
     err = []
-    for _ in range(3):
+    for _ in range(2):
         R = matrix_from_rotvec(rng.normal(0, 0.35, 3))
         t = np.array([-0.07, -0.04, 0.45 + 0.3 * rng.random()])
-        view = render_board_view(cam, board, R, t, noise_sd=2.0, blur_sigma_px=0.7, rng=rng, px_per_m=10000)
+        view = render_board_view(cam, board, R, t, noise_sd=2.0, blur_sigma_px=0.7, rng=rng, px_per_m=5000)
         truth = view.corners_px.reshape(-1, 4, 2)
         td = detect_tags(view.image, scales=(1.0,))
         assert sorted(td.ids.tolist()) == list(range(6))
@@ -80,10 +80,10 @@ def test_rendered_tags_against_their_truth():
 
 
 def test_pose_of_a_tag_from_its_triangulated_corners():
-    """A 60 mm tag moving in front of 6 cameras, corners seen with 0.2 px noise: the pose from the
+    """A 60 mm tag moving in front of 4 cameras, corners seen with 0.2 px noise: the pose from the
     triangulated corners is within 1 mm of the truth, and its orientation error has the RMS that
     the corners' SDs predict (sigma / s sqrt(2.5) for four corners of a square of side s)."""
-    rig = ring_rig(6, rng=np.random.default_rng(1))
+    rig = ring_rig(4, rng=np.random.default_rng(1))
     rng = np.random.default_rng(2)
     n = 40
     tpl = tag_template(0.06)
