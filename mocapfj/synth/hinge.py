@@ -98,7 +98,7 @@ from .scenario import reference_trajectory
 
 __all__ = ["HingeCase", "FAMILIES", "PARAMETER_NAMES", "simulate_hinge", "write_hinge_bundle", "sample_cases",
            "first_row_case", "small_grid", "fourier_from_peak", "pd_gains", "case_digest", "GENERATOR_VERSION",
-           "logged_torque", "dropout_mask", "with_spring", "SPRINGS", "FRICTION_KINDS"]
+           "logged_torque", "dropout_mask", "with_spring", "SPRINGS", "FRICTION_KINDS", "deflection_noise_sd"]
 
 PARAMETER_NAMES = ("I", "mglx", "mgly", "c", "v", "J", "b", "k")
 FRICTION_LAWS = ("sign", "tanh")
@@ -619,9 +619,7 @@ def simulate_hinge(case: HingeCase) -> tuple[Recording, dict]:
     rec = Recording(name=case.name, markers=markers, controller=controller, joints=(joint,),
                     spec={"synthetic": {"generator": "mocapfj.synth.hinge", "case": case.name, "seed": case.seed}})
 
-    radii = np.asarray(case.marker_radii_m)
-    angle_sigma = case.marker_noise_m / float(np.sqrt(np.sum(radii ** 2)))
-    deflection_noise = float(np.sqrt(angle_sigma ** 2 + quantum ** 2 / 12 + case.motor_noise_rad ** 2))
+    angle_sigma, deflection_noise = _angle_sigma(case), deflection_noise_sd(case)
     u_rms = float(np.sqrt(np.mean(u_true ** 2)))
     truth = {
         "generator": "mocapfj.synth.hinge",
@@ -773,6 +771,19 @@ def _family_of(base_seed: int, i: int) -> str:
     block = np.random.default_rng(np.random.SeedSequence([int(base_seed), i // len(_BLOCK), 13])).permutation(
         len(_BLOCK))
     return _BLOCK[int(block[i % len(_BLOCK)])]
+
+
+def _angle_sigma(case: HingeCase) -> float:
+    """SD of the mocap link angle per sample, rad (the markers' noise over the cluster's radii)."""
+    return case.marker_noise_m / float(np.sqrt(np.sum(np.asarray(case.marker_radii_m) ** 2)))
+
+
+def deflection_noise_sd(case: HingeCase) -> float:
+    """The per-sample SD of the measured deflection q_m - q, rad: the mocap angle's, the resolver's
+    quantisation (2 pi / (2^bits N)) and the motor angle's white noise together (truth.json's
+    ``noise.deflection_noise_sd_rad``, without simulating)."""
+    quantum = 2 * np.pi / (2.0 ** case.resolver_bits * case.gear_ratio)
+    return float(np.sqrt(_angle_sigma(case) ** 2 + quantum ** 2 / 12 + case.motor_noise_rad ** 2))
 
 
 def sample_cases(n: int, base_seed: int, *, family: str | None = None) -> list[HingeCase]:

@@ -15,7 +15,7 @@ from mocapfj.discover.compare import compare_channel, excitation_period_s
 from mocapfj.discover.model import simulate_joint
 from mocapfj.dynamics import CoulombViscous, JointModel, LinearSpring
 from mocapfj.ident.conditioning import lowpass, noise_gain
-from mocapfj.synth.hinge import simulate_hinge, small_grid
+from mocapfj.synth.hinge import deflection_noise_sd, simulate_hinge, small_grid
 
 FS = 200.0
 
@@ -92,13 +92,9 @@ def test_true_model_of_an_independent_simulator_scores_at_its_floor():
 
 
 @pytest.fixture(scope="module")
-def pa10_control():
+def pa10_control(pa10_hinge):
     """A PA-10 joint of the hinge grid (20-30 s, sign friction, white torque noise) and its true model."""
-    case = small_grid(6)[0]
-    rec, _ = simulate_hinge(case)
-    s = mocapfj.signals(rec)
-    m = JointModel(name="j1", gear_ratio=case.gear_ratio, I=case.I, J=case.J, mglx=case.mglx, mgly=case.mgly, b=case.b,
-                   friction=CoulombViscous(c=case.c, v=case.v, smoothing=case.eps_rad_s), spring=LinearSpring(k=case.k))
+    _, s, m = pa10_hinge
     return s, m
 
 
@@ -196,8 +192,7 @@ def test_grid_subset_an_effect_at_the_noise_is_named_and_recovers_the_gap(effect
     from mocapfj.synth.hinge import fourier_from_peak
 
     case = small_grid(6)[0]
-    _, truth = simulate_hinge(case)
-    sd_n = truth["noise"]["deflection_noise_sd_rad"]
+    sd_n = deflection_noise_sd(case)
     if effect == "transmission_error":
         planted = replace(case, te_amplitudes_rad=(0.6 * sd_n, 0.6 * sd_n), te_phases_rad=(0.7, 2.1), te_orders=(1.0, 2.0))
     else:

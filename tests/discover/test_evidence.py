@@ -15,14 +15,10 @@ from mocapfj.discover.effects import FITTERS
 from mocapfj.discover.evidence import Evidence
 from mocapfj.discover.model import simulate_joint
 from mocapfj.discover.refit import refit
-from mocapfj.dynamics import Backlash, BoucWen, CoulombViscous, CubicSpring, JointModel, LinearSpring
-from mocapfj.synth.hinge import simulate_hinge, small_grid
+from mocapfj.dynamics import Backlash, BoucWen, CubicSpring
+from mocapfj.synth.hinge import deflection_noise_sd, simulate_hinge, small_grid
 
-
-def _nominal(case) -> JointModel:
-    return JointModel(name="j1", gear_ratio=case.gear_ratio, I=case.I, J=case.J, mglx=case.mglx, mgly=case.mgly,
-                      b=case.b, friction=CoulombViscous(c=case.c, v=case.v, smoothing=case.eps_rad_s),
-                      spring=LinearSpring(k=case.k))
+from .conftest import nominal_of
 
 
 @pytest.fixture(scope="module")
@@ -30,9 +26,8 @@ def backlash_case():
     """A PA-10 hinge case of the small grid with free play of 1.5 x the deflection noise (total
     width) in front of its spring."""
     case = small_grid(6)[0]
-    _, truth = simulate_hinge(case)
-    planted = replace(case, backlash_rad=1.5 * truth["noise"]["deflection_noise_sd_rad"])
-    return planted, mocapfj.signals(simulate_hinge(planted)[0]), _nominal(case)
+    planted = replace(case, backlash_rad=1.5 * deflection_noise_sd(case))
+    return planted, mocapfj.signals(simulate_hinge(planted)[0]), nominal_of(case)
 
 
 def test_a_prepared_comparison_equals_the_full_one(backlash_case):
