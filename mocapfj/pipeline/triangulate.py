@@ -194,6 +194,10 @@ def run_triangulate(inputs: Sequence[str | os.PathLike], rig: str | os.PathLike,
     summary["n_detections"] = int(det.frame.size)
     summary["n_nonfinite_ignored"] = int((~finite).sum())
     unl = (det.point_id == -1) & finite
+    if where == "images" and cl and all(c.tag_id is not None for c in cl):
+        # images with tag clusters only: the blobs (a tag's white border reads as one) name no marker
+        summary["n_blobs_ignored"] = int(unl.sum())
+        unl[:] = False
 
     columns: dict[str, dict] = {}                # label -> {"xyz", "res", "mask", "filled"} (T, ...)
     tri_parts = []

@@ -157,3 +157,48 @@ def test_bad_input_exits_2_and_writes_nothing(scene, capsys, tmp_path, case, nee
     code, stdout, err = _run(["triangulate", *args], capsys)
     assert code == 2 and needle in err and len(err.strip().splitlines()) == 1 and err.startswith("mocapfj: error:")
     assert not out.exists()
+
+
+def test_images_with_an_apriltag_give_its_pose(capsys, tmp_path):
+    """A 15 cm tag36h11 tag (id 0) rendered in 3 cameras for 2 frames: its corners are found,
+    triangulated from every camera, and tag_poses.csv gives its pose within 2 mm and 1 deg."""
+    from mocapfj.io import read_csv_columns
+    from mocapfj.rotations import matrix_from_rotvec
+    from mocapfj.synth.images import render_board_view
+    from mocapfj.types import Board
+    from mocapfj.vision.camera import camera_centre_world
+
+    rig = ring_rig(8, rng=np.random.default_rng(5), size=(640, 512), fx=600.0)
+    cams = rig.cameras[:3]
+    board = Board("aprilgrid", 1, 1, tag_m=0.15, spacing_m=0.03, family="tag36h11")
+    toward = camera_centre_world(cams[1]) - np.array([0.0, 0.0, 1.2])
+    z = -toward / np.linalg.norm(toward)                           # printed face towards camera 1
+    x = np.cross([0.0, 0.0, 1.0], z)
+    x /= np.linalg.norm(x)
+    R0 = np.column_stack([x, np.cross(z, x), z])
+    rng = np.random.default_rng(6)
+    poses = []
+    for f in range(2):
+        R = matrix_from_rotvec([0.1 * f, 0.05, 0.0]) @ R0
+        t = np.array([0.02 * f, 0.0, 1.2]) - R @ np.array([0.075, 0.075, 0.0])     # tag centre at (0.02 f, 0, 1.2)
+        poses.append((R, t))
+        for c, cam in enumerate(cams):
+            folder = tmp_path / f"cam{c}"
+            folder.mkdir(exist_ok=True)
+            view = render_board_view(cam, board, R, t, px_per_m=2000, noise_sd=1.0, rng=rng)
+            cv2.imwrite(str(folder / f"f{f}.png"), view.image)
+    write_rig(tmp_path / "rig.toml", Rig(cams, {"units": "m"}))
+    (tmp_path / "tags.toml").write_text('format = "mocapfj.clusters/1"\n[[tags]]\nname = "tag0"\nid = 0\nsize_m = 0.15\n')
+    code, out, err = _run(["triangulate", *(str(tmp_path / f"cam{c}") for c in range(3)), "--rig",
+                           str(tmp_path / "rig.toml"), "--rate", "30", "--clusters", str(tmp_path / "tags.toml"),
+                           "--out", str(tmp_path / "o"), "--json"], capsys)
+    assert code == 0, err
+    s = json.loads(out)
+    assert s["labels"] == ["tag0_0", "tag0_1", "tag0_2", "tag0_3"] and s["files"]["tag_poses"] == "tag_poses.csv"
+    cols = read_csv_columns(tmp_path / "o" / "tag_poses.csv")
+    for f, (R, t) in enumerate(poses):
+        centre = R @ np.array([0.075, 0.075, 0.0]) + t
+        got = np.array([cols[f"tag0_t{a}_m"][f] for a in "xyz"])
+        assert np.linalg.norm(got - centre) < 2e-3
+        Rg = matrix_from_rotvec([cols[f"tag0_r{a}_rad"][f] for a in "xyz"])
+        assert np.degrees(np.arccos(np.clip((np.trace(Rg.T @ R) - 1) / 2, -1, 1))) < 1.0
