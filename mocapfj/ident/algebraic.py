@@ -144,10 +144,10 @@ class SlidingEstimate:
 
 def _check_signals(t, y, u, what: str = "y"):
     dims: dict = {}
-    t = check_array(t, "t", ("T",), dims=dims)
-    y = check_array(y, what, ("T",), dims=dims)
+    t = check_array(t, "t", ("T",), dims=dims, finite=True)
+    y = check_array(y, what, ("T",), dims=dims, finite=True)
     if u is not None:
-        u = check_array(u, "u", ("T",), dims=dims)
+        u = check_array(u, "u", ("T",), dims=dims, finite=True)
     if t.size < MIN_WINDOW_SAMPLES:
         raise InputError(None, "t", f"at least {MIN_WINDOW_SAMPLES} samples", t.size, hint="record a longer segment")
     dt = np.diff(t)
