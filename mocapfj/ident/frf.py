@@ -1,0 +1,293 @@
+"""Frequency response function from periodic (multisine) data, open or closed loop
+(Makarov, Grossard, Rodriguez-Ayerbe and Dumur 2012, eq. 23-27; Pintelon and Schoukens 2012).
+
+Data: realisations m = 1..M of a periodic excitation, each P periods of N samples after the
+transient periods are dropped. The DFT of period p of realisation m at line k gives U_mp(k),
+Y_mp(k) (and R_mp(k) for a reference), eq. (23): Y = G U + V. Their period means Ū_m, Ȳ_m and the
+period-to-period sample (co)variances give the noise level at every line with M (P - 1) degrees of
+freedom, whatever the loop: periodic excitation, non-periodic noise.
+
+Estimators at the excited lines:
+
+- ``"h1"``: G = sum_{m,p} Y U* / sum_{m,p} |U|^2, the classical H1 over all periods. In closed loop
+  the input U carries the fed-back noise, so H1 is biased (towards -1 / C, the inverse controller).
+- ``"harmonic"``: per realisation G_m = Ȳ_m / Ū_m (eq. 26: periods averaged first, which removes the
+  noise from both), combined by the harmonic mean G = (1/M sum_m G_m^{-1})^{-1} (eq. 25, 27).
+- ``"indirect"`` (closed loop, reference r given): G = sum_m Ȳ_m R̄_m* / sum_m Ū_m R̄_m* = S_ry / S_ru,
+  unbiased because r is independent of the noise.
+- ``"auto"``: indirect with a reference, harmonic without.
+
+Variances by linearisation (first order in the noise): with v_m = E|dȲ_m - G dŪ_m|^2 =
+s_Y^2 + |G|^2 s_U^2 - 2 Re(G* s_YU) from the period-to-period (co)variances divided by P,
+var G_m = v_m / |Ū_m|^2; the harmonic mean has var G = |G|^4 / M^2 sum_m var G_m / |G_m|^4, the
+indirect estimator var G = sum_m |R̄_m|^2 v_m / |sum_m Ū_m R̄_m*|^2. H1 gets the textbook
+(1 - gamma^2) / (gamma^2 n_blocks) |G|^2. With M >= 2 realisations the spread of the G_m gives a
+second, total variance that also holds the stochastic nonlinear distortions (Schoukens, Pintelon,
+Rolain and Dobrowiecki 2001).
+
+Nonlinear distortion: the output at the unexcited lines inside the band (the detection lines of an
+odd multisine, :mod:`.multisine`): odd lines show odd distortion, even lines even distortion; each
+level is reported beside the noise level at the same lines.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..errors import InputError
+
+__all__ = ["FRF", "Distortion", "estimate_frf", "FRF_ESTIMATORS"]
+
+FRF_ESTIMATORS = ("auto", "h1", "harmonic", "indirect")
+
+
+@dataclass(frozen=True, eq=False)
+class Distortion:
+    """Output at the unexcited lines of the band (nonlinear distortion) and the noise there.
+
+    f_even_hz, f_odd_hz : (De,), (Do,) frequencies of the even and odd detection lines, Hz
+    y_even, y_odd : (De,), (Do,) RMS over realisations of the period-mean output amplitude |Ȳ|
+    noise_even, noise_odd : (De,), (Do,) SD of the period-mean output from the period-to-period spread
+    y_excited : float
+        RMS of |Ȳ| over the excited lines (the reference level).
+    even_db, odd_db, noise_db : float or None
+        20 log10 of the RMS over the lines of y_even, y_odd and of the noise at all detection lines,
+        relative to y_excited (None without such lines).
+    even_detected, odd_detected : bool
+        The detection-line power exceeds 4x the noise power there (a distortion above the noise).
+    """
+
+    f_even_hz: np.ndarray
+    y_even: np.ndarray
+    noise_even: np.ndarray
+    f_odd_hz: np.ndarray
+    y_odd: np.ndarray
+    noise_odd: np.ndarray
+    y_excited: float
+    even_db: float | None
+    odd_db: float | None
+    noise_db: float | None
+    even_detected: bool
+    odd_detected: bool
+
+    def to_dict(self) -> dict:
+        return {"even": {"f_hz": self.f_even_hz, "level": self.y_even, "noise": self.noise_even, "db": self.even_db,
+                         "detected": self.even_detected},
+                "odd": {"f_hz": self.f_odd_hz, "level": self.y_odd, "noise": self.noise_odd, "db": self.odd_db,
+                        "detected": self.odd_detected},
+                "noise_db": self.noise_db, "output_level": self.y_excited}
+
+
+@dataclass(frozen=True, eq=False)
+class FRF:
+    """A frequency response G(j w_k) = Y / U at the excited lines, with its uncertainty.
+
+    Attributes
+    ----------
+    f_hz : (K,) excited frequencies, Hz
+    G : (K,) complex, output unit per input unit (e.g. rad / (N m))
+    var : (K,) noise variance E|G_hat - G|^2 from the period-to-period spread
+    var_total : (K,) or None
+        Variance from the spread over realisations (noise and stochastic nonlinear distortion), M >= 2.
+    coherence : (K,) ordinary coherence of u and y over all M P periods
+    lines : (K,) int, DFT lines of one period
+    estimator : "h1", "harmonic" or "indirect"
+    n_periods, n_realisations : int, periods used per realisation (after the transient), realisations
+    fs_hz : float; n_samples : int, period in samples
+    closed_loop : bool, a reference was given
+    distortion : Distortion
+    """
+
+    f_hz: np.ndarray
+    G: np.ndarray
+    var: np.ndarray
+    var_total: np.ndarray | None
+    coherence: np.ndarray
+    lines: np.ndarray
+    estimator: str
+    n_periods: int
+    n_realisations: int
+    fs_hz: float
+    n_samples: int
+    closed_loop: bool
+    distortion: Distortion
+
+    @property
+    def magnitude(self) -> np.ndarray:
+        return np.abs(self.G)
+
+    @property
+    def phase_rad(self) -> np.ndarray:
+        """Unwrapped phase, rad."""
+        return np.unwrap(np.angle(self.G))
+
+    @property
+    def std(self) -> np.ndarray:
+        """(K,) SD of G_hat (complex, |.|), from `var`."""
+        return np.sqrt(self.var)
+
+    def to_dict(self) -> dict:
+        return {"estimator": self.estimator, "closed_loop": self.closed_loop, "n_periods": self.n_periods,
+                "n_realisations": self.n_realisations, "fs_hz": self.fs_hz, "period_samples": self.n_samples,
+                "frequencies_hz": self.f_hz, "magnitude": self.magnitude, "phase_rad": self.phase_rad,
+                "real": self.G.real, "imag": self.G.imag, "coherence": self.coherence, "noise": self.std,
+                "noise_total": None if self.var_total is None else np.sqrt(self.var_total),
+                "distortion": self.distortion.to_dict()}
+
+
+def _blocks(name, x, n_samples, skip):
+    x = np.asarray(x, dtype=np.float64)
+    if x.ndim == 1:
+        x = x[None]
+    if x.ndim != 2:
+        raise InputError(None, name, "a signal (T,) or realisations (M, T)", f"shape {x.shape}")
+    if not np.all(np.isfinite(x)):
+        i = np.argwhere(~np.isfinite(x))[0]
+        raise InputError(None, name, "finite samples", f"{x[tuple(i)]} at sample {i[-1]}")
+    p = x.shape[1] // n_samples - skip
+    if p < 2:
+        raise InputError(None, name, f"at least {skip + 2} periods of {n_samples} samples ({skip} dropped as transient, "
+                         "2 to measure the noise)", f"{x.shape[1] / n_samples:.3g} periods",
+                         hint="record more periods or lower the transient count")
+    x = x[:, skip * n_samples:(skip + p) * n_samples].reshape(x.shape[0], p, n_samples)
+    return np.fft.rfft(x, axis=-1) * (2.0 / n_samples), x.shape
+
+
+def _excited(X, rel):
+    """Lines whose period-mean amplitude exceeds `rel` x the largest and 2x its own period-to-period
+    noise SD (a periodic excitation there, not noise; DC and Nyquist excluded); none when their
+    median power SNR is below 25 (no periodic excitation at all, or a wrong period)."""
+    P = X.shape[1]
+    Xm = X.mean(axis=1)
+    a2 = np.mean(np.abs(Xm) ** 2, axis=0)
+    noise = np.mean(np.sum(np.abs(X - Xm[:, None]) ** 2, axis=1), axis=0) / ((P - 1) * P)
+    a2[0] = a2[-1] = 0.0
+    if a2.max() <= 0:
+        return np.empty(0, int)
+    k = np.flatnonzero((a2 > rel ** 2 * a2.max()) & (a2 > 4 * noise))
+    snr = a2[k] / np.maximum(noise[k], 1e-300)
+    return k if k.size and np.median(snr) > 25 else np.empty(0, int)   # noise alone passes 2 % of the lines, at SNR ~ 4-8
+
+
+def estimate_frf(u, y, fs_hz: float, period_samples: int, *, r=None, estimator: str = "auto",
+                 transient_periods: int = 1, lines=None, min_rel_amplitude: float = 1e-2) -> FRF:
+    """FRF of y over u from periodic data (Makarov et al. 2012, eq. 23-27), open or closed loop.
+
+    Parameters
+    ----------
+    u, y : (T,) or (M, T)
+        Input (e.g. motor torque, N m) and output (e.g. motor angle, rad), sampled at fs_hz, one row
+        per realisation, starting at a period boundary of the excitation.
+    fs_hz : float
+        Sampling rate, Hz.
+    period_samples : int
+        Period N of the excitation, samples; trailing samples short of a whole period are dropped.
+    r : (T,) or (M, T) or None
+        The reference of a closed loop (e.g. the multisine motor-position reference).
+    estimator : "auto", "h1", "harmonic" or "indirect"
+    transient_periods : int
+        Periods dropped at the start of each realisation (the transient); at least 2 must remain.
+    lines : (K,) int or None
+        Excited DFT lines; None: those where the period-mean amplitude of r (else u) exceeds
+        `min_rel_amplitude` times its largest and twice its period-to-period noise SD.
+
+    Raises InputError for too few periods, an unknown estimator, a line without input (an
+    unexcited frequency) or an input spectrum that vanishes in a realisation.
+    """
+    if estimator not in FRF_ESTIMATORS:
+        raise InputError(None, "estimator", f"one of {', '.join(FRF_ESTIMATORS)}", estimator)
+    if not (np.isfinite(fs_hz) and fs_hz > 0):
+        raise InputError(None, "fs_hz", "a positive sampling rate in Hz", fs_hz)
+    if int(period_samples) != period_samples or period_samples < 4:
+        raise InputError(None, "period_samples", "a period of at least 4 samples", period_samples)
+    if int(transient_periods) != transient_periods or transient_periods < 0:
+        raise InputError(None, "transient_periods", "a whole number >= 0", transient_periods)
+    n, skip = int(period_samples), int(transient_periods)
+    if np.shape(np.atleast_2d(y)) != np.shape(np.atleast_2d(u)):
+        raise InputError(None, "y", f"the shape of u {np.shape(u)}", np.shape(y))
+    U, shape = _blocks("u", u, n, skip)
+    Y, _ = _blocks("y", y, n, skip)
+    R = None
+    if r is not None:
+        if np.shape(np.atleast_2d(r)) != np.shape(np.atleast_2d(u)):
+            raise InputError(None, "r", f"the shape of u {np.shape(u)}", np.shape(r))
+        R, _ = _blocks("r", r, n, skip)
+    if estimator == "auto":
+        estimator = "indirect" if R is not None else "harmonic"
+    if estimator == "indirect" and R is None:
+        raise InputError(None, "r", "the reference signal (the indirect estimator needs it)", "none")
+    M, P, _ = shape
+    if lines is None:
+        k = _excited(R if R is not None else U, min_rel_amplitude)
+        if k.size == 0:
+            raise InputError(None, "r" if R is not None else "u", "a periodic excitation at some frequency",
+                             "no line excited", hint=f"check the period ({n} samples)")
+    else:
+        k = np.unique(np.asarray(lines, dtype=int))
+        if k.size == 0 or k.min() < 1 or k.max() >= n // 2:
+            raise InputError(None, "lines", f"DFT lines within 1..{n // 2 - 1}", k)
+
+    Um, Ym = U.mean(axis=1)[:, k], Y.mean(axis=1)[:, k]                       # (M, K)
+    dU, dY = U[:, :, k] - Um[:, None], Y[:, :, k] - Ym[:, None]
+    s_uu = np.sum(np.abs(dU) ** 2, axis=1) / ((P - 1) * P)                  # variances of the period means
+    s_yy = np.sum(np.abs(dY) ** 2, axis=1) / ((P - 1) * P)
+    s_yu = np.sum(dY * dU.conj(), axis=1) / ((P - 1) * P)
+    au = np.abs(Um)
+    weak = au <= 1e-9 * max(au.max(), 1e-300)
+    if weak.any():
+        mi, ki = np.argwhere(weak)[0]
+        raise InputError(None, "u", "an input spectrum above its noise at every excited frequency",
+                         f"|U| = {au[mi, ki]:.3g} (largest {au.max():.3g}) at "
+                         f"{k[ki] * fs_hz / n:.6g} Hz in realisation {mi + 1}",
+                         hint="that frequency is not excited (a singular input spectrum): excite it or leave it out")
+
+    def v_of(G):
+        return np.maximum(s_yy + np.abs(G) ** 2 * s_uu - 2 * np.real(np.conj(G) * s_yu), 0.0)
+
+    Gm = Ym / Um
+    Uall, Yall = U[:, :, k].reshape(M * P, -1), Y[:, :, k].reshape(M * P, -1)
+    Syu, Suu, Syy = (Yall * Uall.conj()).sum(0), (np.abs(Uall) ** 2).sum(0), (np.abs(Yall) ** 2).sum(0)
+    coh = np.abs(Syu) ** 2 / np.maximum(Suu * Syy, 1e-300)
+    if estimator == "h1":
+        G = Syu / Suu
+        var = (1 - coh) / np.maximum(coh, 1e-12) / (M * P) * np.abs(G) ** 2
+    elif estimator == "harmonic":
+        G = 1.0 / np.mean(1.0 / Gm, axis=0)
+        var_m = v_of(Gm) / au ** 2
+        var = np.abs(G) ** 4 / M ** 2 * np.sum(var_m / np.abs(Gm) ** 4, axis=0)
+    else:
+        Rm = R.mean(axis=1)[:, k]
+        den = np.sum(Um * Rm.conj(), axis=0)
+        G = np.sum(Ym * Rm.conj(), axis=0) / den
+        var = np.sum(np.abs(Rm) ** 2 * v_of(G), axis=0) / np.abs(den) ** 2
+    var_total = None
+    if M >= 2:
+        if estimator == "harmonic":
+            inv = 1.0 / Gm
+            var_total = np.abs(G) ** 4 * np.sum(np.abs(inv - inv.mean(0)) ** 2, axis=0) / ((M - 1) * M)
+        else:
+            var_total = np.sum(np.abs(Gm - Gm.mean(0)) ** 2, axis=0) / ((M - 1) * M)
+
+    # distortion at the unexcited lines of the band
+    inside = np.arange(k.min(), k.max() + 1)
+    det = np.setdiff1d(inside, k)
+    Yd = Y.mean(axis=1)[:, det]
+    nd = np.sqrt(np.mean(np.sum(np.abs(Y[:, :, det] - Yd[:, None]) ** 2, axis=1) / ((P - 1) * P), axis=0))
+    yd = np.sqrt(np.mean(np.abs(Yd) ** 2, axis=0))
+    y_exc = float(np.sqrt(np.mean(np.abs(Ym) ** 2)))
+    ev, od = det % 2 == 0, det % 2 == 1
+
+    def db(x):
+        return None if x.size == 0 or y_exc == 0 else float(20 * np.log10(max(np.sqrt(np.mean(x ** 2)), 1e-300) / y_exc))
+
+    def detected(sel):
+        return bool(sel.any() and np.mean(yd[sel] ** 2) > 4 * np.mean(nd[sel] ** 2))
+
+    dist = Distortion(f_even_hz=det[ev] * fs_hz / n, y_even=yd[ev], noise_even=nd[ev], f_odd_hz=det[od] * fs_hz / n,
+                      y_odd=yd[od], noise_odd=nd[od], y_excited=y_exc, even_db=db(yd[ev]), odd_db=db(yd[od]),
+                      noise_db=db(nd), even_detected=detected(ev), odd_detected=detected(od))
+    return FRF(f_hz=k * fs_hz / n, G=G, var=var, var_total=var_total, coherence=coh, lines=k, estimator=estimator,
+               n_periods=P, n_realisations=M, fs_hz=float(fs_hz), n_samples=n, closed_loop=R is not None,
+               distortion=dist)
