@@ -148,65 +148,80 @@ def speed_table(quick: bool):
     print("\nrobust rows: 5 % of the views moved by 5-35 px; the speed-up of the 20,000-point row compares points/s.")
 
 
-def scenario_table(duration: float, names):
+def build_scenario(name: str, duration: float):
+    """One PA-10 scenario as unlabelled detections with dropouts and spurious blobs (module docstring):
+    (rig, det, clusters, rend, keep, layout, n, rate_hz, sigma_px)."""
     from mocapfj.synth.record import marker_layout, scenario_rngs, simulate_scenario
     from mocapfj.synth.render import render_markers
     from mocapfj.synth.robot_mesh import base_pose, forward_kinematics, pa10_geometry
     from mocapfj.synth.scenario import load_scenario
     import dataclasses
 
+    scn = load_scenario(ROOT / "datasets" / f"{name}.toml")
+    scn = dataclasses.replace(scn, duration_s=duration)
+    sim = simulate_scenario(scn)
+    rng_layout, rng_rig, _, _ = scenario_rngs(scn)
+    m = scn.measurement
+    n = int(round(duration * m.mocap_hz))
+    t = np.arange(n) / m.mocap_hz
+    q_full = np.tile(np.asarray(scn.pose_rad, float), (n, 1))
+    for j in scn.joints:
+        r = sim[j.name]
+        col = r.joint_names.index(j.name) if r.q.shape[1] > 1 else 0
+        q_full[:, j.axis - 1] = np.interp(t, r.t, r.q[:, col])
+    geometry = pa10_geometry()
+    T = forward_kinematics(q_full, T_world_base=base_pose())
+    layout = marker_layout(scn, geometry, rng_layout)
+    rig = ring_rig(m.n_cameras, rng=rng_rig)
+    rng = np.random.default_rng(scn.seed + 1000)
+    rend = render_markers(t, T, layout, geometry, rig, rng, pixel_noise_px=m.pixel_noise_px)
+    d = rend.detections
+    keep = rng.random(d.frame.size) > 0.03
+    k = rng.poisson(1.0, (n, len(rig.cameras)))
+    gf, gc = np.nonzero(k)
+    gf, gc = np.repeat(gf, k[gf, gc]), np.repeat(gc, k[gf, gc])
+    det = Detections(np.r_[d.frame[keep], gf], np.r_[d.camera[keep], gc],
+                     np.r_[d.xy_px[keep], rng.uniform([0, 0], rig.cameras[0].size, (gf.size, 2))],
+                     np.full(keep.sum() + gf.size, -1))
+    clusters = [MarkerCluster(f"link{li}", [layout.labels[i] for i in layout.cluster(li)],
+                              layout.p_link[layout.cluster(li)]) for li in np.unique(layout.link)]
+    return rig, det, clusters, rend, keep, layout, n, m.mocap_hz, m.pixel_noise_px
+
+
+def score_labelling(lab, rend, keep, layout, n):
+    """(labelled samples, wrong labels, found share of the markers seen by >= 2 cameras, NaN share)."""
+    d = rend.detections
+    order = [layout.labels.index(s) for s in lab.markers.labels]
+    truth = rend.xyz_true[:, order]
+    xyz = lab.markers.xyz
+    have = np.isfinite(xyz[..., 0])
+    dist = np.linalg.norm(xyz[:, :, None] - truth[:, None], axis=3)
+    nearest = np.argmin(np.where(np.isfinite(dist), dist, np.inf), axis=2)
+    wrong = have & ((nearest != np.arange(len(order))[None]) | (np.linalg.norm(xyz - truth, axis=2) > 0.01))
+    seen = np.zeros((n, len(order)), int)
+    np.add.at(seen, (d.frame[keep], np.argsort(order)[d.point_id[keep]]), 1)
+    seen = seen >= 2
+    return int(have.sum()), int(wrong.sum()), (have & seen).sum() / seen.sum(), 1 - have.mean()
+
+
+def scenario_table(duration: float, names):
     print("\n| scenario | frames | detections | spurious | correspondence (s) | labelling (s) | labelled samples | "
           "wrong labels | found of seen by >= 2 cameras | NaN share | gaps filled | long gaps |")
     print("|---|---|---|---|---|---|---|---|---|---|---|---|")
     for name in names:
-        scn = load_scenario(ROOT / "datasets" / f"{name}.toml")
-        scn = dataclasses.replace(scn, duration_s=duration)
-        sim = simulate_scenario(scn)
-        rng_layout, rng_rig, _, _ = scenario_rngs(scn)
-        m = scn.measurement
-        n = int(round(duration * m.mocap_hz))
-        t = np.arange(n) / m.mocap_hz
-        q_full = np.tile(np.asarray(scn.pose_rad, float), (n, 1))
-        for j in scn.joints:
-            r = sim[j.name]
-            col = r.joint_names.index(j.name) if r.q.shape[1] > 1 else 0
-            q_full[:, j.axis - 1] = np.interp(t, r.t, r.q[:, col])
-        geometry = pa10_geometry()
-        T = forward_kinematics(q_full, T_world_base=base_pose())
-        layout = marker_layout(scn, geometry, rng_layout)
-        rig = ring_rig(m.n_cameras, rng=rng_rig)
-        rng = np.random.default_rng(scn.seed + 1000)
-        rend = render_markers(t, T, layout, geometry, rig, rng, pixel_noise_px=m.pixel_noise_px)
-        d = rend.detections
-        keep = rng.random(d.frame.size) > 0.03
-        k = rng.poisson(1.0, (n, len(rig.cameras)))
-        gf, gc = np.nonzero(k)
-        gf, gc = np.repeat(gf, k[gf, gc]), np.repeat(gc, k[gf, gc])
-        det = Detections(np.r_[d.frame[keep], gf], np.r_[d.camera[keep], gc],
-                         np.r_[d.xy_px[keep], rng.uniform([0, 0], rig.cameras[0].size, (gf.size, 2))],
-                         np.full(keep.sum() + gf.size, -1))
-        clusters = [MarkerCluster(f"link{li}", [layout.labels[i] for i in layout.cluster(li)],
-                                  layout.p_link[layout.cluster(li)]) for li in np.unique(layout.link)]
+        rig, det, clusters, rend, keep, layout, n, rate, sigma = build_scenario(name, duration)
+        n_spurious = det.frame.size - int(keep.sum())
         tic = time.perf_counter()
-        cand = match_detections(rig, det, sigma_px=m.pixel_noise_px)
+        cand = match_detections(rig, det, sigma_px=sigma)
         t_corr = time.perf_counter() - tic
         ok = np.isfinite(cand.p_world[:, 0])
         tic = time.perf_counter()
-        lab = label_points(cand.frame[ok], cand.p_world[ok], clusters, n_frames=n, rate_hz=m.mocap_hz,
+        lab = label_points(cand.frame[ok], cand.p_world[ok], clusters, n_frames=n, rate_hz=rate,
                            residual_m=cand.triangulation.ray_residual_m[ok])
         t_lab = time.perf_counter() - tic
-        order = [layout.labels.index(s) for s in lab.markers.labels]
-        truth = rend.xyz_true[:, order]
-        xyz = lab.markers.xyz
-        have = np.isfinite(xyz[..., 0])
-        dist = np.linalg.norm(xyz[:, :, None] - truth[:, None], axis=3)
-        nearest = np.argmin(np.where(np.isfinite(dist), dist, np.inf), axis=2)
-        wrong = have & ((nearest != np.arange(len(order))[None]) | (np.linalg.norm(xyz - truth, axis=2) > 0.01))
-        seen = np.zeros((n, len(order)), int)
-        np.add.at(seen, (d.frame[keep], np.argsort(order)[d.point_id[keep]]), 1)
-        seen = seen >= 2
-        print(f"| {name} | {n} | {det.frame.size} | {gf.size} | {t_corr:.2f} | {t_lab:.2f} | {int(have.sum())} | "
-              f"{int(wrong.sum())} | {100 * (have & seen).sum() / seen.sum():.2f} % | {100 * (1 - have.mean()):.2f} % | "
+        n_have, n_wrong, found, nan_share = score_labelling(lab, rend, keep, layout, n)
+        print(f"| {name} | {n} | {det.frame.size} | {n_spurious} | {t_corr:.2f} | {t_lab:.2f} | {n_have} | "
+              f"{n_wrong} | {100 * found:.2f} % | {100 * nan_share:.2f} % | "
               f"{lab.stats['gaps_filled']} | {lab.stats['n_long_gaps']} |")
 
 
