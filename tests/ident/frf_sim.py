@@ -32,15 +32,16 @@ def plant_frf(f_hz, p, output="motor"):
 
 
 def simulate_multisine(p, ms_list, n_periods, *, kp=None, kd=None, noise_sd=0.0, y_noise_sd=0.0, u_noise_sd=0.0,
-                       seed=0):
+                       seed=0, output="motor"):
     """Realisations (one per Multisine of `ms_list`) of n_periods periods each.
 
     Closed loop when kp is given (the multisine is the position reference r, rad), else open loop
     (the multisine is the torque u, N m). noise_sd: SD of the held motor-torque disturbance w, N m;
     y_noise_sd, u_noise_sd: white measurement noise on the logged q_m and u (not fed back).
-    Returns (u, y, r) each (M, n_periods N), y = q_m.
+    Returns (u, y, r) each (M, n_periods N), y = q_m (output "motor") or q (output "link").
     """
     A, B = plant_matrices(**p)
+    c = 0 if output == "motor" else 2
     closed = kp is not None
     K = np.array([kp, kd, 0, 0]) if closed else np.zeros(4)
     Acl = A - np.outer(B, K)
@@ -59,7 +60,7 @@ def simulate_multisine(p, ms_list, n_periods, *, kp=None, kd=None, noise_sd=0.0,
             Xc[i] = np.linalg.solve(s * np.eye(4) - Acl, drive)
             Uc[i] = (kp + kd * s) - K @ Xc[i] if closed else 1.0
         E = np.exp(1j * np.outer(t, 2 * np.pi * f)) * cphase
-        y = np.real(E @ Xc[:, 0])
+        y = np.real(E @ Xc[:, c])
         u = np.real(E @ Uc)
         r = np.real(E.sum(axis=1))
         if noise_sd > 0:
@@ -72,7 +73,7 @@ def simulate_multisine(p, ms_list, n_periods, *, kp=None, kd=None, noise_sd=0.0,
             for i in range(t.size):
                 xs[i] = x
                 x = Ad @ x + Bd * w[i]
-            y = y + xs[:, 0]
+            y = y + xs[:, c]
             u = u - xs @ K
         U.append(u + (rng.normal(0, u_noise_sd, t.size) if u_noise_sd else 0))
         Y.append(y + (rng.normal(0, y_noise_sd, t.size) if y_noise_sd else 0))

@@ -1,0 +1,279 @@
+"""The two-inertia flexible joint fitted to a measured FRF, its modes and their uncertainty.
+
+Model (Makarov, Grossard, Rodriguez-Ayerbe and Dumur 2012, eq. 5-7, one joint, gravity linearised away;
+Lightcap and Banks (2007), eq. 4 with the spring damping d):
+
+    J q_m'' + b q_m' + k (q_m - q) + d (q_m' - q') = u          (motor, torque u on the link side)
+    I q''   + v q'   = k (q_m - q) + d (q_m' - q')               (link)
+
+gives, with Z(s) = d s + k and D(s) = J I s^3 + (J (v + d) + (b + d) I) s^2 + (J k + I k + b (v + d) + d v) s
++ k (b + v),
+
+    q_m / u = (I s^2 + (v + d) s + k) / (s D(s))     (``output="motor"``: colocated, anti-resonance then resonance)
+    q   / u = (d s + k) / (s D(s))                    (``output="link"``: the resonance only)
+
+The anti-resonance is the link swinging on the spring with the motor held, omega_a^2 = k / I; the
+resonance the two inertias against each other, omega_r^2 ~ k (1/I + 1/J).
+
+Fit: weighted nonlinear least squares on the complex FRF (the maximum-likelihood criterion of a
+FRF with circular complex Gaussian errors, Pintelon and Schoukens 2012, §7): minimise
+sum_k |G_hat_k - G(j w_k, theta)|^2 / var_k with var_k the FRF's noise variance, theta = (ln J, ln I, ln k, d, b, v),
+d, b, v >= 0. The variances are the FRF's own, from the period-to-period spread, line by line (not
+smoothed over frequency: a smoothed variance flattens the peak at the resonance, exactly where the
+modes are decided, and the SDs of f_r came out 2.7x too small on the grid of benchmarks/bench_frf.py).
+Their M (P - 1) complex degrees of freedom per line inflate the chi-square by about
+nu / (nu - 1); with 3 periods or more the SDs cover the errors (z RMS 0.8-1.3 in the benchmark).
+Covariance: (A^T A)^{-1} at the optimum (A the Jacobian of the weighted residuals),
+times the reduced chi-square when that exceeds 1 (model error or nonlinear distortion beyond the
+noise). Modes: the anti-resonance from the numerator's complex roots, the resonance from D's,
+f = |p| / 2 pi and zeta = -Re p / |p|; their SDs by the delta method.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.optimize import least_squares
+
+from ..errors import InputError
+from .frf import FRF
+from .result import Parameter
+
+__all__ = ["TWO_INERTIA_PARAMS", "FRF_MODELS", "Mode", "FRFFit", "two_inertia_frf", "two_inertia_modes",
+           "fit_two_inertia"]
+
+TWO_INERTIA_PARAMS = ("J", "I", "k", "d", "b", "v")
+FRF_MODELS = ("two_inertia",)
+_OUTPUTS = ("motor", "link")
+
+
+@dataclass(frozen=True)
+class Mode:
+    """A resonance (pole pair) or anti-resonance (zero pair): frequency, damping ratio and SDs."""
+
+    kind: str
+    f_hz: float
+    zeta: float
+    f_hz_std: float
+    zeta_std: float
+
+    def to_dict(self) -> dict:
+        return {"kind": self.kind, "f_hz": self.f_hz, "zeta": self.zeta, "f_hz_std": self.f_hz_std,
+                "zeta_std": self.zeta_std}
+
+
+@dataclass(frozen=True, eq=False)
+class FRFFit:
+    """The two-inertia model fitted to an FRF.
+
+    params : dict name -> Parameter (J, I kg m^2; k N m/rad; d, b, v N m s/rad), value and SD
+    cov : (6, 6) covariance of (J, I, k, d, b, v) (rows and columns of fixed parameters zero)
+    modes : tuple of Mode, anti-resonance first (motor output), then the resonance
+    chi2, dof : weighted residual sum of squares and its degrees of freedom (2 K - free parameters)
+    G_fit : (K,) complex, the model at the FRF's frequencies
+    output : "motor" or "link"
+    """
+
+    params: dict
+    cov: np.ndarray
+    modes: tuple
+    chi2: float
+    dof: int
+    G_fit: np.ndarray
+    output: str
+    model: str = "two_inertia"
+
+    @property
+    def chi2_red(self) -> float:
+        return self.chi2 / max(self.dof, 1)
+
+    def value(self, name: str) -> float:
+        return self.params[name].value
+
+    def to_dict(self) -> dict:
+        return {"name": self.model, "output": self.output,
+                "params": {n: {"value": p.value, "std": p.std, "rel_std_pct": p.rel_std_pct}
+                           for n, p in self.params.items()},
+                "chi2": self.chi2, "dof": self.dof, "chi2_red": self.chi2_red,
+                "modes": [m.to_dict() for m in self.modes]}
+
+
+def _polys(J, I, k, d, b, v):
+    """Numerator coefficients (motor, link) and D(s) (highest power first)."""
+    D = np.array([J * I, J * (v + d) + (b + d) * I, J * k + I * k + b * (v + d) + d * v, k * (b + v)])
+    return np.array([I, v + d, k]), np.array([d, k]), D
+
+
+def two_inertia_frf(f_hz, J, I, k, d=0.0, b=0.0, v=0.0, *, output: str = "motor") -> np.ndarray:
+    """G(j 2 pi f) of the two-inertia joint, (K,) complex, rad / (N m), for f_hz (K,) > 0."""
+    s = 2j * np.pi * np.asarray(f_hz, dtype=np.float64)
+    nm, nl, D = _polys(J, I, k, d, b, v)
+    return np.polyval(nm if output == "motor" else nl, s) / (s * np.polyval(D, s))
+
+
+def two_inertia_modes(J, I, k, d=0.0, b=0.0, v=0.0, *, output: str = "motor") -> list[tuple[str, float, float]]:
+    """[(kind, f_hz, zeta)]: the anti-resonance (motor output, when its zeros are complex) and the resonance."""
+    nm, _, D = _polys(J, I, k, d, b, v)
+    out = []
+    if output == "motor":
+        out += [("antiresonance", *_fz(r)) for r in np.roots(nm) if r.imag > 0]
+    out += [("resonance", *_fz(r)) for r in np.roots(D) if r.imag > 0]
+    return out
+
+
+def _fz(p):
+    return float(abs(p) / (2 * np.pi)), float(-p.real / abs(p))
+
+
+def _initial(frf: FRF, output: str):
+    """Starting points from the FRF's shape: rigid-body inertia and viscosity below the first mode,
+    the mode frequencies from |G| w^2 (flat for a double integrator)."""
+    f, G = frf.f_hz, frf.G
+    w = 2 * np.pi * f
+    a = np.abs(G) * w ** 2
+    ia = int(np.argmin(a)) if output == "motor" else 0
+    ir = ia + int(np.argmax(a[ia:]))
+    if output == "motor" and (ia in (0, f.size - 1) or ir == ia):
+        raise InputError(None, "frf", "an anti-resonance and a resonance inside the excited band (motor side)",
+                         f"|G| w^2 without a dip then a peak over {f[0]:.3g}-{f[-1]:.3g} Hz",
+                         hint="widen the multisine band around the joint's modes")
+    f_first = f[ia] if output == "motor" else f[ir]
+    low = f < 0.6 * f_first
+    if low.sum() < 2:
+        low = np.arange(f.size) < 2
+    Z = 1.0 / G[low]
+    A = np.column_stack([-w[low] ** 2, 1j * w[low]])
+    mb = np.linalg.lstsq(np.vstack([A.real, A.imag]), np.concatenate([Z.real, Z.imag]), rcond=None)[0]
+    M = abs(mb[0]) if mb[0] != 0 else 1.0 / a[0]
+    B = max(mb[1], 1e-6 * M * w[0])
+    starts = []
+    if output == "motor":
+        wa, wr = w[ia], w[ir]
+        rho = max((wr / wa) ** 2 - 1, 1e-2)
+        J = M / (1 + rho)
+        I = M - J
+        k = I * wa ** 2
+        for z in (0.005, 0.03, 0.1):
+            starts.append((J, I, k, 2 * z * wa * I, B / 2, B / 2))
+    else:
+        wr = w[ir]
+        for rho in (0.3, 1.0, 3.0):
+            J = M / (1 + rho)
+            I = M - J
+            k = wr ** 2 / (1 / I + 1 / J)
+            starts.append((J, I, k, 0.03 * 2 * np.sqrt(k * I * J / (I + J)), B / 2, B / 2))
+    return starts
+
+
+def fit_two_inertia(frf: FRF, *, output: str = "motor", fixed: dict | None = None, f_band_hz=None) -> FRFFit:
+    """Fit (J, I, k, d, b, v) of the two-inertia joint to `frf` by weighted nonlinear least squares.
+
+    Parameters
+    ----------
+    frf : FRF
+        From :func:`mocapfj.ident.frf.estimate_frf`; input torque (N m), output angle (rad).
+    output : "motor" or "link"
+        Which angle the FRF's output is. The link-side FRF determines 5 coefficients for 6
+        parameters: hold one (`fixed`).
+    fixed : dict name -> value or None
+        Parameters held at known values (e.g. the rigid part known: ``{"J": ...}``).
+    f_band_hz : (lo, hi) or None
+        Fit only the lines inside this band.
+    """
+    if not isinstance(frf, FRF):
+        raise InputError(None, "frf", "an FRF (mocapfj.ident.frf.estimate_frf)", type(frf).__name__)
+    if output not in _OUTPUTS:
+        raise InputError(None, "output", "motor or link", output)
+    fixed = dict(fixed or {})
+    for n_, v_ in fixed.items():
+        if n_ not in TWO_INERTIA_PARAMS or not np.isfinite(v_) or v_ < 0 or (n_ in "JIk" and v_ <= 0):
+            raise InputError(None, f"fixed.{n_}", f"one of {TWO_INERTIA_PARAMS} with a valid value", v_)
+    sel = np.ones(frf.f_hz.size, bool)
+    if f_band_hz is not None:
+        sel = (frf.f_hz >= f_band_hz[0]) & (frf.f_hz <= f_band_hz[1])
+    if output == "link" and not fixed:
+        raise InputError(None, "fixed", "one parameter held at a known value for a link-side FRF (e.g. the motor "
+                         "inertia J): q / u has 5 independent coefficients for 6 parameters", "none")
+    free = [i for i, n_ in enumerate(TWO_INERTIA_PARAMS) if n_ not in fixed]
+    if 2 * sel.sum() <= len(free):
+        raise InputError(None, "frf", f"more than {len(free) / 2:.0f} excited lines to fit {len(free)} parameters",
+                         int(sel.sum()))
+    f, G = frf.f_hz[sel], frf.G[sel]
+    sd = np.sqrt(np.maximum(frf.var[sel], (1e-10 * np.abs(frf.G[sel])) ** 2 + 1e-300) / 2.0)   # noise-free data: 1e-10 relative
+    sub = FRF(f, G, frf.var[sel], None, frf.coherence[sel], frf.lines[sel], frf.estimator, frf.n_periods,
+              frf.n_realisations, frf.fs_hz, frf.n_samples, frf.closed_loop, frf.distortion)
+    starts = _initial(sub, output)
+    log = np.array([True, True, True, False, False, False])
+
+    def full(x):
+        th = np.empty(6)
+        th[free] = x
+        for i, n_ in enumerate(TWO_INERTIA_PARAMS):
+            if n_ in fixed:
+                th[i] = np.log(fixed[n_]) if log[i] else fixed[n_]
+        return th
+
+    def natural(th):
+        return np.where(log, np.exp(np.clip(th, -700, 700)), th)
+
+    def resid(x):
+        e = (G - two_inertia_frf(f, *natural(full(x)), output=output)) / sd
+        return np.concatenate([e.real, e.imag])
+
+    lb = np.where(log, -np.inf, 0.0)[free]
+    best = None
+    for p0 in starts:
+        th0 = np.where(log, np.log(np.maximum(p0, 1e-300)), p0)
+        x0 = np.clip(th0[free], lb, np.inf)
+        x0 = np.where(np.isfinite(lb) & (x0 <= lb), lb + 1e-9, x0)
+        try:
+            sol = least_squares(resid, x0, bounds=(lb, np.inf), x_scale="jac", method="trf", max_nfev=2000,
+                                xtol=1e-12, ftol=1e-12)
+        except ValueError:
+            continue
+        if best is None or sol.cost < best.cost:
+            best = sol
+    if best is None or not np.all(np.isfinite(best.x)):
+        raise InputError(None, "frf", "an FRF the two-inertia model can be fitted to", "no convergence")
+    A = best.jac
+    dof = 2 * f.size - len(free)
+    chi2 = float(2 * best.cost)
+    try:
+        cov_x = np.linalg.inv(A.T @ A) * max(1.0, chi2 / max(dof, 1))
+    except np.linalg.LinAlgError:
+        cov_x = np.full((len(free), len(free)), np.nan)
+    th = full(best.x)
+    val = natural(th)
+    Jn = np.diag(np.where(log, val, 1.0))[:, free]          # d natural / d x
+    cov = Jn @ cov_x @ Jn.T
+    std = np.sqrt(np.maximum(np.diag(cov), 0.0))
+    params = {n_: Parameter(n_, float(val[i]), float(std[i])) for i, n_ in enumerate(TWO_INERTIA_PARAMS)}
+
+    base = two_inertia_modes(*val, output=output)
+    modes = []
+    if base:
+        def mode_vec(x):
+            m = two_inertia_modes(*natural(full(x)), output=output)
+            if [kk for kk, _, _ in m] != [kk for kk, _, _ in base]:
+                return np.full(2 * len(base), np.nan)
+            return np.array([v_ for _, ff, zz in m for v_ in (ff, zz)])
+
+        m0 = mode_vec(best.x)
+        D = np.empty((m0.size, best.x.size))
+        for j in range(best.x.size):
+            h = 1e-6 * max(abs(best.x[j]), 1e-3 if log[free[j]] else abs(best.x[j]) + 1e-8)
+            xp, xm = best.x.copy(), best.x.copy()
+            xp[j] += h
+            xm[j] -= h
+            if not log[free[j]] and xm[j] < 0:
+                xm[j] = best.x[j]
+                D[:, j] = (mode_vec(xp) - m0) / h
+            else:
+                D[:, j] = (mode_vec(xp) - mode_vec(xm)) / (xp[j] - xm[j])
+        cm = D @ cov_x @ D.T
+        sm = np.sqrt(np.maximum(np.diag(cm), 0.0))
+        for i, (kind, fr, z) in enumerate(base):
+            modes.append(Mode(kind, fr, z, float(sm[2 * i]), float(sm[2 * i + 1])))
+    return FRFFit(params=params, cov=cov, modes=tuple(modes), chi2=chi2, dof=dof,
+                  G_fit=two_inertia_frf(frf.f_hz, *val, output=output), output=output)
