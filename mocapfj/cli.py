@@ -36,7 +36,8 @@ def _work(args):
 def _inputs(args) -> list:
     """The paths a command reads (that --out must keep clear of)."""
     out = []
-    for name in ("scenario", "recording", "model", "validation", "board", "wand", "detections", "intrinsics", "lframe"):
+    for name in ("scenario", "recording", "model", "validation", "board", "wand", "detections", "intrinsics", "lframe",
+                 "csv", "wrench_file", "urdf", "mdh"):
         if getattr(args, name, None):
             out.append(getattr(args, name))
     views = [p for paths in (getattr(args, "camera", None) or []) for p in paths]
@@ -341,6 +342,81 @@ def _allow_outside_bundle(parser) -> None:
                         help="read files that recording.toml names outside its bundle (../, absolute paths, symlinks)")
 
 
+def _cmd_algebraic(args) -> int:
+    from .pipeline.algebraic import run_algebraic
+
+    s = run_algebraic(args.csv, _work(args), output=args.output, input=args.input, time=args.time, start=args.start,
+                      duration=args.duration, window=args.window, offset=not args.no_offset, inertia=args.inertia)
+
+    def human(s):
+        j = s["joints"][0]
+        lines = [f"{j['name']} over {j['segment_s'][0]:.4g}..{j['segment_s'][1]:.4g} s"]
+        for key in ("algebraic", "log_decrement"):
+            e = j.get(key)
+            if e is None:
+                continue
+            if "error" in e:
+                lines.append(f"  {key}: not available ({e['error']})")
+                continue
+            line = (f"  {key}: f0 {e['f0_hz']:.4g} +- {e['f0_hz_std']:.2g} Hz (omega0 {e['omega0']:.5g} rad/s), "
+                    f"zeta {e['zeta']:.4g} +- {e['zeta_std']:.2g}, fit {e['fit_pct']:.1f} %")
+            if "stiffness" in e:
+                line += f", K {e['stiffness']:.5g} +- {e['stiffness_std']:.2g} N m/rad"
+            lines.append(line)
+        if "agree" in j:
+            lines.append(f"  the two estimates {'agree' if j['agree'] else 'DISAGREE'} (omega0 "
+                         f"{j['agreement_sd']['omega0']:+.1f} SD, zeta {j['agreement_sd']['zeta']:+.1f} SD)")
+        if "sliding" in j:
+            sl = j["sliding"]
+            lines.append(f"  sliding {sl['window_s'] * 1e3:.0f} ms windows ({sl['n_valid']} of {sl['n_windows']}): "
+                         f"f0 {sl['f0_hz_median']:.4g} Hz, zeta {sl['zeta_median']:.4g} (median)")
+        lines.append(f"  wrote {args.out}/algebraic.json" + (", sliding.csv" if "sliding" in j else ""))
+        return "\n".join(lines)
+
+    _emit(args, s, human)
+    return 0
+
+
+def _cmd_precompensate(args) -> int:
+    from .pipeline.algebraic import run_precompensate
+
+    s = run_precompensate(args.csv, _work(args), reference=args.reference, time=args.time, omega0=args.omega0,
+                          zeta=args.zeta, model=args.model, iterations=args.iterations)
+
+    def human(s):
+        return (f"pre-compensated {s['reference']} (omega0 {s['omega0']:.5g} rad/s, zeta {s['zeta']:.4g}): the model's "
+                f"link error {s['predicted_peak_before']:.3g} -> {s['predicted_peak_after']:.3g} rad peak "
+                f"({s['predicted_peak_ratio']:.1f}x)\n  wrote {args.out}/command.csv, precompensate.json")
+
+    _emit(args, s, human)
+    return 0
+
+
+def _cmd_clamped(args) -> int:
+    from .pipeline.clamped import run_clamped
+
+    s = run_clamped(args.csv, _work(args), positions=args.positions, torques=args.torques, wrench=args.wrench,
+                    wrench_file=args.wrench_file, time=args.time, urdf=args.urdf, mdh=args.mdh, frame=args.frame,
+                    joints=args.joints, cutoff=args.cutoff, decimate_cutoff=args.decimate_cutoff)
+
+    def human(s):
+        lines = [f"clamped end-effector stiffness from {s['file']}"]
+        for j in s["joints"]:
+            for key in ("motor_torque", "wrench"):
+                if key in j:
+                    f = j[key]
+                    lines.append(f"  {j['name']} by {key.replace('_', ' ')}: k {f['k']:.4g} N m/rad "
+                                 f"({f['k_rel_std_pct']:.2g} %), offset {f['offset']:.4g} N m, "
+                                 f"|W chi - Y| / |Y| {f['rel_error_pct']:.3g} %")
+            if "rel_diff_pct" in j:
+                lines.append(f"  {j['name']}: the two differ by {j['rel_diff_pct']:.3g} % ({j['diff_sd']:.1f} SD)")
+        lines.append(f"  wrote {args.out}/clamped.json, table.md")
+        return "\n".join(lines)
+
+    _emit(args, s, human)
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(
         prog="mocapfj",
@@ -460,6 +536,52 @@ def build_parser() -> argparse.ArgumentParser:
     i.add_argument("--json", action="store_true", help="print a JSON summary on stdout")
     _allow_outside_bundle(i)
     i.set_defaults(func=_cmd_inspect)
+
+    al = sub.add_parser("algebraic", help="fast omega0 and zeta of a joint's oscillation (algebraic estimator, "
+                                          "logarithmic decrement)")
+    al.add_argument("csv", help="CSV with a header row (docs/formats.md)")
+    al.add_argument("--output", required=True, help="column of the link angle or the deflection, rad")
+    al.add_argument("--input", default=None, help="column of the motor angle (link side, rad) driving the joint; "
+                                                  "omit for a free vibration after a stop")
+    al.add_argument("--time", default="time", help="time column, s (default time)")
+    al.add_argument("--start", type=float, default=None, help="start of the segment, s (default the first sample)")
+    al.add_argument("--duration", type=float, default=None, help="length of the segment, s (default to the end)")
+    al.add_argument("--window", type=float, default=None, help="also estimate over sliding windows of this length, s")
+    al.add_argument("--no-offset", action="store_true", help="the equilibrium is known: y - u rests at 0")
+    al.add_argument("--inertia", type=float, default=None, help="link inertia J, kg m^2: report K = J omega0^2")
+    al.add_argument("--out", required=True, help="output directory")
+    al.add_argument("--json", action="store_true", help="print a JSON summary on stdout")
+    al.set_defaults(func=_cmd_algebraic)
+
+    pc = sub.add_parser("precompensate", help="motor command anticipating the joint's deflection (Oueslati et al. "
+                                              "2012, eq. 17)")
+    pc.add_argument("csv", help="CSV with the reference trajectory")
+    pc.add_argument("--reference", required=True, help="column of the reference, rad (link side)")
+    pc.add_argument("--time", default="time", help="time column, s (default time)")
+    pc.add_argument("--omega0", type=float, default=None, help="natural frequency, rad/s")
+    pc.add_argument("--zeta", type=float, default=None, help="damping ratio")
+    pc.add_argument("--model", default=None, help="algebraic.json from mocapfj algebraic (instead of --omega0/--zeta)")
+    pc.add_argument("--iterations", type=int, default=1, help="1: their law; more repeat the correction on the model")
+    pc.add_argument("--out", required=True, help="output directory")
+    pc.add_argument("--json", action="store_true", help="print a JSON summary on stdout")
+    pc.set_defaults(func=_cmd_precompensate)
+
+    cl = sub.add_parser("clamped", help="joint stiffness with the end-effector clamped (Jubien et al. 2014)")
+    cl.add_argument("csv", help="controller CSV: time, motor angles and torques (link side)")
+    cl.add_argument("--positions", required=True, help="motor angle columns, comma-separated, in joint order, rad")
+    cl.add_argument("--torques", default=None, help="motor torque columns, comma-separated, N m")
+    cl.add_argument("--wrench", default=None, help="six columns fx,fy,fz,mx,my,mz (N, N m, tool frame; 0 = not measured)")
+    cl.add_argument("--wrench-file", default=None, help="the force sensor's own CSV (with a --time column)")
+    cl.add_argument("--urdf", default=None, help="robot URDF (for the wrench)")
+    cl.add_argument("--mdh", default=None, help="modified DH CSV (alpha,d,theta_offset,r) or kr500 (for the wrench)")
+    cl.add_argument("--frame", default="tool", help="the frame the wrench is expressed in (default tool)")
+    cl.add_argument("--joints", default=None, help="joint numbers to identify, 1-based, comma-separated (default all)")
+    cl.add_argument("--time", default="time", help="time column, s (default time)")
+    cl.add_argument("--cutoff", type=float, default=10.0, help="low-pass cut-off, Hz (default 10)")
+    cl.add_argument("--decimate-cutoff", type=float, default=5.0, help="decimation filter cut-off, Hz (default 5)")
+    cl.add_argument("--out", required=True, help="output directory")
+    cl.add_argument("--json", action="store_true", help="print a JSON summary on stdout")
+    cl.set_defaults(func=_cmd_clamped)
 
     for name, help_text in PLANNED:
         s = sub.add_parser(name, help=f"{help_text} (not yet available)", add_help=True)

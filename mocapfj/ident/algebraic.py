@@ -45,12 +45,17 @@ from scipy.interpolate import CubicSpline
 from ..errors import InputError
 from ..validate import check_array
 
-__all__ = ["SecondOrderEstimate", "SlidingEstimate", "algebraic_estimate", "algebraic_sliding", "log_decrement",
+__all__ = ["MIN_FIT_PCT", "SecondOrderEstimate", "SlidingEstimate", "algebraic_estimate", "algebraic_sliding", "log_decrement",
            "zeta_from_decrement", "second_order_response", "quadrature_kernels", "MIN_WINDOW_SAMPLES"]
 
 MIN_WINDOW_SAMPLES = 8
 """Fewest samples a window may hold: the cubic-spline integrals need them, and below a handful per
 window the quadrature error exceeds what any noise level would."""
+
+
+MIN_FIT_PCT = 50.0
+"""A segment whose identified model explains less of its variance than this holds no oscillation
+above the noise: :func:`algebraic_estimate` refuses it rather than return a number."""
 
 
 @dataclass(frozen=True)
@@ -277,7 +282,8 @@ def algebraic_estimate(t, y, u=None, *, offset: bool = True, orders=None, noise_
     ------
     InputError
         Fewer than `MIN_WINDOW_SAMPLES` samples, non-uniform sampling, or a segment that does not
-        determine the parameters (no oscillation in it, or omega0^2 <= 0).
+        determine the parameters (omega0^2 <= 0, or a fit below `MIN_FIT_PCT`: no oscillation
+        above the noise).
     """
     t, y, u = _check_signals(t, y, u)
     orders = _orders(offset, orders)
@@ -299,6 +305,11 @@ def algebraic_estimate(t, y, u=None, *, offset: bool = True, orders=None, noise_
     l1, l2 = float(l1), float(l2)
     omega0, zeta = math.sqrt(l2), l1 / (2 * math.sqrt(l2))
     model, rms, lam3 = _refit(t, y, u, omega0, zeta, offset)
+    fit = _fit_pct(y, model)
+    if not fit >= MIN_FIT_PCT:
+        raise InputError(None, "y", f"a segment whose oscillation the model explains (fit >= {MIN_FIT_PCT:g} %)",
+                         f"fit {fit:.3g} % (omega0 {omega0:.4g} rad/s, zeta {zeta:.3g})",
+                         hint="no oscillation above the noise here: take the segment after a stop or a motion change")
     sd = rms if noise_sd is None else float(noise_sd)
     # first-order noise propagation: d(theta) = A^+ (db - dA theta) = A^+ G eps
     G = wb - th[0] * wa[:, 0] - th[1] * wa[:, 1]
@@ -310,7 +321,7 @@ def algebraic_estimate(t, y, u=None, *, offset: bool = True, orders=None, noise_
     return SecondOrderEstimate(method="algebraic", omega0=omega0, omega0_std=float(np.sqrt(C[0, 0])), zeta=zeta,
                                zeta_std=float(np.sqrt(C[1, 1])), lambda1=float(l1), lambda2=float(l2), cov=C,
                                equilibrium=lam3 / l2 if offset else float("nan"), t_start=float(t[0]),
-                               t_end=float(t[-1]), noise_sd=sd, fit_pct=_fit_pct(y, model), n_samples=int(t.size))
+                               t_end=float(t[-1]), noise_sd=sd, fit_pct=fit, n_samples=int(t.size))
 
 
 def algebraic_sliding(t, y, u=None, *, window_s: float, offset: bool = True, orders=None,

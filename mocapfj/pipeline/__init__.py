@@ -7,6 +7,8 @@
 - :mod:`.calibrate`: ``calibrate-camera`` (camera.toml, intrinsics.json, detections.json, coverage.png) and
   ``calibrate-rig`` (rig.toml, calibrate_rig.json, detections.csv).
 - :mod:`.triangulate`: ``triangulate`` (markers.c3d, triangulate.json, tag_poses.csv).
+- :mod:`.algebraic`: ``algebraic`` (algebraic.json, sliding.csv) and ``precompensate`` (command.csv,
+  precompensate.json); :mod:`.clamped`: ``clamped`` (clamped.json, table.md).
 """
 
 from .core import (default_scenario, inspect_path, run_demo, run_joints, run_simulate, summarize_markers,
@@ -20,3 +22,7 @@ __all__ = ["default_scenario", "inspect_path", "run_demo", "run_joints", "run_si
            "summarize_recording", "write_joints", "run_discover", "run_identify", "write_tables"]
 __all__ += ["run_calibrate_camera", "run_calibrate_rig"]
 __all__ += ["run_triangulate"]
+from .algebraic import run_algebraic, run_precompensate
+from .clamped import run_clamped
+
+__all__ += ["run_algebraic", "run_precompensate", "run_clamped"]

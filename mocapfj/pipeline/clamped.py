@@ -1,0 +1,89 @@
+"""Files over the clamped end-effector stiffness of Jubien et al. (2014): ``mocapfj clamped`` reads
+a CSV (and the force sensor's CSV), runs :mod:`mocapfj.ident.clamped` and writes its results under
+``--out``. No maths here."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import InputError
+from ..io import read_csv_columns, write_json
+from .algebraic import _column
+
+__all__ = ["run_clamped"]
+
+
+def _names(arg: str, what: str) -> list[str]:
+    names = [s.strip() for s in str(arg).split(",")]
+    if not names or any(not s for s in names):
+        raise InputError(None, what, "comma-separated column names", repr(arg))
+    return names
+
+
+def run_clamped(csv, out: str | Path, positions: str, torques: str | None = None, wrench: str | None = None,
+                wrench_file: str | Path | None = None, time: str = "time", urdf: str | Path | None = None,
+                mdh: str | Path | None = None, frame: str = "tool", joints: str | None = None,
+                cutoff: float = 10.0, decimate_cutoff: float = 5.0) -> dict:
+    """``mocapfj clamped``: joint stiffness with the end-effector clamped (Jubien et al. 2014).
+
+    `positions` and `torques`: comma-separated columns of the motor angles and torques (link side,
+    rad and N m, one per joint in the robot's order); `wrench`: six columns fx, fy, fz, mx, my, mz
+    (N, N m, in `frame`; "0" for a component not measured), read from `wrench_file` (with its own
+    `time` column) when the sensor logs apart; the robot from `urdf` or `mdh` (a CSV with columns
+    alpha, d, theta_offset, r, or "kr500" for Jubien et al.'s Table 1). `joints`: comma-separated
+    1-based joint numbers (default all). Writes OUT/clamped.json and OUT/table.md.
+    """
+    from ..ident.clamped import KR500_MDH, identify_clamped
+
+    out = Path(out)
+    cols = read_csv_columns(csv)
+    t = _column(csv, cols, time)
+    pos_names = _names(positions, "positions")
+    q_m = np.column_stack([_column(csv, cols, c) for c in pos_names])
+    n = q_m.shape[1]
+    tau = None
+    if torques is not None:
+        tq = _names(torques, "torques")
+        if len(tq) != n:
+            raise InputError(None, "torques", f"{n} columns (one per --positions column)", len(tq))
+        tau = np.column_stack([_column(csv, cols, c) for c in tq])
+    F = tw = model = None
+    if wrench is not None:
+        wn = _names(wrench, "wrench")
+        if len(wn) != 6:
+            raise InputError(None, "wrench", "six columns fx,fy,fz,mx,my,mz ('0' for one not measured)", len(wn))
+        src, wcols = (csv, cols) if wrench_file is None else (wrench_file, read_csv_columns(wrench_file))
+        rows = len(next(iter(wcols.values()))) if wcols else 0
+        F = np.column_stack([np.zeros(rows) if c == "0" else _column(src, wcols, c) for c in wn])
+        if wrench_file is not None:
+            tw = _column(wrench_file, wcols, time)
+        if urdf is not None and mdh is not None:
+            raise InputError(None, "urdf", "--urdf or --mdh, not both", "both")
+        if mdh is not None:
+            if str(mdh).lower() == "kr500":
+                model = KR500_MDH
+            else:
+                mc = read_csv_columns(mdh)
+                model = np.column_stack([_column(mdh, mc, c) for c in ("alpha", "d", "theta_offset", "r")])
+        else:
+            model = urdf
+    sel = None if joints is None else [int(s) - 1 for s in _names(joints, "joints")]
+    res = identify_clamped(t, q_m, tau_m=tau, wrench=F, t_wrench=tw, model=model, frame=frame, joints=sel,
+                           names=pos_names, cutoff_hz=cutoff, decimate_cutoff_hz=decimate_cutoff)
+    summary = {"file": str(csv), "joints": [r.to_dict() for r in res]}
+    lines = ["| joint | method | k (N m/rad) | rel. SD (%) | offset (N m) | rel. SD (%) | |W chi - Y| / |Y| (%) |",
+             "|---|---|---|---|---|---|---|"]
+    for r in res:
+        for f in (r.motor, r.wrench):
+            if f is not None:
+                lines.append(f"| {r.name} | {f.source} | {f.k:.4g} | {f.k_rel_std_pct:.2g} | {f.offset:.4g} | "
+                             f"{f.offset_rel_std_pct:.2g} | {f.rel_error_pct:.3g} |")
+        if r.motor is not None and r.wrench is not None:
+            lines.append(f"| {r.name} | difference | {r.rel_diff_pct:.3g} % | | | | |")
+    from ..io.atomic import write_text_atomic
+
+    write_text_atomic(out / "table.md", "\n".join(lines) + "\n")
+    write_json(out / "clamped.json", summary)
+    return summary

@@ -1,0 +1,107 @@
+"""mocapfj algebraic, precompensate and clamped: CSV in, JSON and files out, one-line errors."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pytest
+
+from mocapfj.cli import main
+from mocapfj.io import read_csv_columns, write_csv_columns
+from mocapfj.ident.algebraic import second_order_response
+
+W0, ZETA = math.sqrt(1.0794e6 / 290.39), 0.163
+
+
+@pytest.fixture()
+def vibration_csv(tmp_path):
+    """A stop at 0.2 s: the link rings about its rest deflection (Staubli axis 2, 4 ms)."""
+    t = np.arange(0, 0.6, 0.004)
+    y = np.where(t < 0.2, 0.0, 1e-4 + 1.5e-4 * np.exp(-ZETA * W0 * (t - 0.2))
+                 * np.cos(W0 * math.sqrt(1 - ZETA ** 2) * (t - 0.2)))
+    y = y + 1e-7 * np.random.default_rng(0).standard_normal(t.size)
+    p = tmp_path / "stop.csv"
+    write_csv_columns(p, {"time": t, "delta": y, "ref": 0.1 * np.clip(t - 0.1, 0, 0.3) ** 2})
+    return p
+
+
+def run(capsys, argv):
+    rc = main(argv)
+    cap = capsys.readouterr()
+    return rc, cap.out, cap.err
+
+
+def test_algebraic_and_precompensate(tmp_path, capsys, vibration_csv):
+    rc, out, err = run(capsys, ["algebraic", str(vibration_csv), "--output", "delta", "--start", "0.2",
+                                "--duration", "0.1", "--window", "0.08", "--inertia", "290.39",
+                                "--out", str(tmp_path / "a"), "--json"])
+    assert rc == 0, err
+    s = json.loads(out)
+    j = s["joints"][0]
+    assert j["name"] == "delta" and abs(j["algebraic"]["omega0"] / W0 - 1) < 0.02
+    assert abs(j["algebraic"]["zeta"] / ZETA - 1) < 0.05
+    assert j["algebraic"]["stiffness"] == pytest.approx(1.0794e6, rel=0.04)
+    assert "error" in j["log_decrement"]          # 0.1 s holds too few extrema: said, not guessed
+    assert (tmp_path / "a" / "algebraic.json").is_file() and (tmp_path / "a" / "sliding.csv").is_file()
+    sl = read_csv_columns(tmp_path / "a" / "sliding.csv")
+    assert sl["t_end"].size == j["sliding"]["n_windows"]
+    # longer segment: both estimates, and they agree
+    rc, out, err = run(capsys, ["algebraic", str(vibration_csv), "--output", "delta", "--start", "0.2",
+                                "--out", str(tmp_path / "b"), "--json"])
+    j = json.loads(out)["joints"][0]
+    assert rc == 0 and j["agree"] and abs(j["log_decrement"]["omega0"] / W0 - 1) < 0.02
+    # pre-compensation from the estimate
+    rc, out, err = run(capsys, ["precompensate", str(vibration_csv), "--reference", "ref", "--model",
+                                str(tmp_path / "a" / "algebraic.json"), "--out", str(tmp_path / "c")])
+    assert rc == 0 and "wrote" in out, err
+    c = read_csv_columns(tmp_path / "c" / "command.csv")
+    assert set(c) == {"time", "ref", "command", "predicted_error_before", "predicted_error_after"}
+    # their eq. 17: command = reference - (link_sim - reference)
+    a = json.loads((tmp_path / "a" / "algebraic.json").read_text())["joints"][0]["algebraic"]
+    y = second_order_response(c["time"], a["omega0"], a["zeta"], c["ref"], y0=c["ref"][0])
+    assert np.allclose(c["command"], 2 * c["ref"] - y, atol=1e-9)
+
+
+def test_clamped_cli_kr500(tmp_path, capsys):
+    from mocapfj.ident.clamped import KR500_CONFIGURATIONS, KR500_MDH, mdh_model, simulate_clamped
+
+    m = mdh_model(KR500_MDH, masses=(1200, 600, 450, 100, 60, 30))
+    k = np.array([6.93e6, 7.81e6, 5e6, 1e6, 1e6, 5e5])
+    ex = simulate_clamped(m, np.array(KR500_CONFIGURATIONS[2]), k, np.random.default_rng(3), torque_drift_sd=150.0,
+                          force_drift_sd=45.0, wrench_gaps=[(20.0, 30.0)])
+    cols = {"time": ex.t}
+    cols.update({f"qm{j + 1}": ex.q_m[:, j] for j in range(6)})
+    cols.update({f"tau{j + 1}": ex.tau_m[:, j] for j in range(6)})
+    write_csv_columns(tmp_path / "log.csv", cols)
+    write_csv_columns(tmp_path / "ati.csv", {"time": ex.t_wrench, "Fz": ex.wrench[:, 2]})
+    pos = ",".join(f"qm{j + 1}" for j in range(6))
+    tq = ",".join(f"tau{j + 1}" for j in range(6))
+    rc, out, err = run(capsys, ["clamped", str(tmp_path / "log.csv"), "--positions", pos, "--torques", tq,
+                                "--wrench", "0,0,Fz,0,0,0", "--wrench-file", str(tmp_path / "ati.csv"),
+                                "--mdh", "kr500", "--joints", "2", "--out", str(tmp_path / "o"), "--json"])
+    assert rc == 0, err
+    (j,) = json.loads(out)["joints"]
+    assert j["name"] == "qm2"
+    for key in ("motor_torque", "wrench"):
+        assert abs(j[key]["k"] / 7.81e6 - 1) < 0.02 and j[key]["k_rel_std_pct"] < 2.1
+    assert (tmp_path / "o" / "table.md").read_text().count("| qm2 |") == 3
+    # bad input: one line, exit 2, nothing written
+    rc, out, err = run(capsys, ["clamped", str(tmp_path / "log.csv"), "--positions", pos, "--torques", "tau1",
+                                "--out", str(tmp_path / "bad")])
+    assert rc == 2 and err.count("\n") == 1 and "--torques" in err and not (tmp_path / "bad").exists()
+    rc, out, err = run(capsys, ["clamped", str(tmp_path / "log.csv"), "--positions", pos, "--wrench", "0,0,Fz,0,0,0",
+                                "--wrench-file", str(tmp_path / "ati.csv"), "--out", str(tmp_path / "bad")])
+    assert rc == 2 and "robot" in err and not (tmp_path / "bad").exists()
+
+
+def test_algebraic_cli_bad_input(tmp_path, capsys, vibration_csv):
+    for argv, words in ((["--output", "nope"], "column 'nope'"),
+                        (["--output", "delta", "--start", "5"], "samples in"),
+                        (["--output", "delta", "--start", "0.0", "--duration", "0.1"], "oscillation")):
+        rc, out, err = run(capsys, ["algebraic", str(vibration_csv), *argv, "--out", str(tmp_path / "x")])
+        assert rc == 2 and err.count("\n") == 1 and words in err, err
+        assert not (tmp_path / "x").exists()
+    rc, out, err = run(capsys, ["precompensate", str(vibration_csv), "--reference", "ref", "--out", str(tmp_path / "x")])
+    assert rc == 2 and "--omega0" in err
