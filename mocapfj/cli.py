@@ -20,7 +20,6 @@ IDENTIFY_METHODS = ("motor_first", "two_step")   # mocapfj.ident.IDENTIFY_METHOD
 
 # Commands of the design that later versions fill in: (name, one-line help).
 PLANNED = [
-    ("frf", "multisine frequency response estimation"),
     ("run", "the whole chain on a recording"),
     ("report", "a readable report of a run"),
     ("view", "open a run in rerun"),
@@ -417,6 +416,38 @@ def _cmd_clamped(args) -> int:
     return 0
 
 
+def _cmd_frf(args) -> int:
+    from .pipeline.frf import run_frf
+
+    s = run_frf(args.recording, _work(args), input=args.input, output=args.output, reference=args.reference,
+                time=args.time, period_s=args.period, model=args.model, transient=args.transient,
+                realisations=args.realisations, estimator=args.estimator)
+
+    def human(s):
+        f = s["frf"]
+        fr = f["frequencies_hz"]
+        lines = [f"FRF {s['output']} / {s['input']} from {s['file']}: {len(fr)} lines {fr[0]:.4g}-{fr[-1]:.4g} Hz, "
+                 f"{f['estimator']} estimator, {f['n_realisations']} realisation(s) x {f['n_periods']} periods of "
+                 f"{s['period_s']:.6g} s, coherence min {min(f['coherence']):.3f}"]
+        d = f["distortion"]
+        lines.append("  distortion at the detection lines: " + ", ".join(
+            f"{k} {d[k]['db']:.1f} dB" + (" (above the noise)" if d[k]["detected"] else "")
+            for k in ("even", "odd") if d[k]["db"] is not None) + (f", noise {d['noise_db']:.1f} dB"
+                                                                 if d["noise_db"] is not None else " none in the band"))
+        if s["model"]:
+            m = s["model"]
+            lines.append(f"  {m['name']}: " + ", ".join(f"{n} {p['value']:.4g} +- {p['std']:.2g}" for n, p in m["params"].items())
+                         + f" (chi2/dof {m['chi2_red']:.2f})")
+            for md in s["modes"]:
+                lines.append(f"  {md['kind']} {md['f_hz']:.4g} +- {md['f_hz_std']:.2g} Hz, zeta {md['zeta']:.3g} +- "
+                             f"{md['zeta_std']:.2g}")
+        lines.append(f"  wrote {args.out}/frf.json, frf.csv")
+        return "\n".join(lines)
+
+    _emit(args, s, human)
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(
         prog="mocapfj",
@@ -582,6 +613,27 @@ def build_parser() -> argparse.ArgumentParser:
     cl.add_argument("--out", required=True, help="output directory")
     cl.add_argument("--json", action="store_true", help="print a JSON summary on stdout")
     cl.set_defaults(func=_cmd_clamped)
+
+    fr = sub.add_parser("frf", help="frequency response and two-inertia model from multisine data "
+                        "(Makarov et al. 2012)")
+    fr.add_argument("recording", metavar="CSV_OR_RECORDING",
+                    help="a CSV with a time column, or a recording bundle (its controller CSV)")
+    fr.add_argument("--input", required=True, help="input column, e.g. motor torque (N m, link side)")
+    fr.add_argument("--output", required=True, help="output column, e.g. motor angle (rad, link side)")
+    fr.add_argument("--reference", default=None, help="closed loop: the reference column (indirect estimator)")
+    fr.add_argument("--time", default=None, help="time column, s (default: the bundle's, else time)")
+    fr.add_argument("--period", type=float, default=None,
+                    help="excitation period, s (default: found where the reference, else the input, repeats)")
+    fr.add_argument("--model", default="two_inertia", choices=["two_inertia", "none"],
+                    help="model fitted to the FRF (default two_inertia: J, I, k, d, b, v; none: the FRF only)")
+    fr.add_argument("--estimator", default="auto", choices=["auto", "h1", "harmonic", "indirect"],
+                    help="auto (default): indirect with --reference, else harmonic mean")
+    fr.add_argument("--transient", type=int, default=1, help="periods dropped at the start of each realisation (1)")
+    fr.add_argument("--realisations", type=int, default=1,
+                    help="the record holds this many equal consecutive realisations (default 1)")
+    fr.add_argument("--out", required=True, help="output directory")
+    fr.add_argument("--json", action="store_true", help="print a JSON summary on stdout")
+    fr.set_defaults(func=_cmd_frf)
 
     for name, help_text in PLANNED:
         s = sub.add_parser(name, help=f"{help_text} (not yet available)", add_help=True)

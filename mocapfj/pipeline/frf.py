@@ -1,0 +1,151 @@
+"""Files over frequency-domain identification (``mocapfj frf``): columns of a CSV (or of a recording
+bundle's controller log) -> :func:`mocapfj.ident.frf.estimate_frf` -> :func:`mocapfj.ident.frf_fit.fit_two_inertia`,
+written as OUT/frf.json and OUT/frf.csv. No maths here beyond reading the sampling grid and the period."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import InputError
+from ..io import write_json
+from ..io.csvio import check_increasing, read_csv_columns, write_csv_columns
+
+__all__ = ["run_frf", "read_frf_columns", "find_period", "FRF_CLI_MODELS"]
+
+FRF_CLI_MODELS = ("two_inertia", "none")
+
+
+def read_frf_columns(path, names: dict, time: str | None) -> tuple[Path, dict, np.ndarray]:
+    """The CSV behind `path` (a CSV, a bundle directory or its recording.toml), the requested columns
+    {option: column name} as arrays and the time column; errors name the file and the column."""
+    path = Path(path)
+    if path.is_dir() or path.suffix.lower() == ".toml":
+        from ..io.tomlio import read_toml, require
+
+        toml_path = path / "recording.toml" if path.is_dir() else path
+        if not toml_path.is_file():
+            raise InputError(toml_path, "file", "a CSV file or a recording bundle holding recording.toml", "no such file")
+        doc = read_toml(toml_path)
+        ctl = require(toml_path, doc, "controller", dict)
+        csv = toml_path.parent / require(toml_path, ctl, "file", str, "controller")
+        time = time or require(toml_path, ctl, "time_column", str, "controller", default="time")
+    else:
+        csv = path
+    time = time or "time"
+    cols = read_csv_columns(csv)
+    out = {}
+    for option, name in {**names, "--time": time}.items():
+        if name is None:
+            continue
+        if name not in cols:
+            raise InputError(csv, option, f"a column of the CSV ({', '.join(list(cols)[:8])}"
+                             f"{', ...' if len(cols) > 8 else ''})", repr(name))
+        x = cols[name]
+        if x.size and not np.all(np.isfinite(x)):
+            i = int(np.argmax(~np.isfinite(x)))
+            raise InputError(csv, f"column {name!r}", "a finite number in every row", f"{x[i]} at row {i + 2}")
+        out[option] = x
+    t = out.pop("--time")
+    check_increasing(csv, f"column {time!r}", t)
+    if t.size < 16:
+        raise InputError(csv, f"column {time!r}", "at least 16 samples", t.size)
+    dt = np.diff(t)
+    step = float(np.median(dt))
+    if np.abs(dt - step).max() > 1e-3 * step:
+        i = int(np.argmax(np.abs(dt - step)))
+        raise InputError(csv, f"column {time!r}", f"a uniform sampling step ({step:.6g} s)",
+                         f"a step of {dt[i]:.6g} s at row {i + 3}", hint="resample to a uniform grid first")
+    return csv, out, t
+
+
+def find_period(x, *, exact: bool) -> int | None:
+    """Smallest lag L >= 8 samples at which x repeats: the normalised mismatch
+    mean (x[n + L] - x[n])^2 / (2 var x) over the record after its first fifth (the transient) is
+    below 1e-8 (`exact`, a reference written to full precision) or below 2 m* + 0.02 with m* the
+    smallest mismatch over the lags (a noisy input); None when nothing repeats (m* > 0.3)."""
+    x = np.asarray(x, dtype=np.float64)
+    x = x[x.size // 5:] - x[x.size // 5:].mean()
+    n = x.size
+    if n < 32 or not np.any(x):
+        return None
+    F = np.fft.rfft(x, 2 * n)
+    ac = np.fft.irfft(F * F.conj(), 2 * n)
+    c2 = np.concatenate([[0.0], np.cumsum(x * x)])
+    L = np.arange(8, n - n // 4 + 1)                   # an overlap of a quarter of the record at least
+    m = (c2[n - L] + (c2[n] - c2[L]) - 2 * ac[L]) / np.maximum(n - L, 1) / (2 * x.var())
+    if exact:
+        hit = np.flatnonzero(m < 1e-8)
+    else:
+        if m.min() > 0.3:
+            return None
+        hit = np.flatnonzero(m < 2 * m.min() + 0.02)
+    return int(L[hit[0]]) if hit.size else None
+
+
+def run_frf(path, out, *, input: str, output: str, reference: str | None = None, time: str | None = None,
+            period_s: float | None = None, model: str = "two_inertia", transient: int = 1, realisations: int = 1,
+            estimator: str = "auto") -> dict:
+    """``mocapfj frf``: the FRF of column `output` over column `input` (Makarov et al. 2012, eq. 23-27),
+    and the two-inertia model fitted to it with its modes.
+
+    The record holds `realisations` equal consecutive parts, each starting with `transient` periods
+    that are dropped. The period comes from `period_s` or, without it, from where the reference
+    (else the input) repeats. Writes OUT/frf.json (the summary) and OUT/frf.csv (per line: f_hz,
+    the FRF, magnitude, phase, coherence, noise SD, and the model's FRF).
+    """
+    from ..ident.frf import estimate_frf
+    from ..ident.frf_fit import fit_two_inertia
+
+    if model not in FRF_CLI_MODELS:
+        raise InputError(None, "model", f"one of {', '.join(FRF_CLI_MODELS)}", model)
+    for name, v in (("transient", transient), ("realisations", realisations)):
+        if int(v) != v or v < (0 if name == "transient" else 1):
+            raise InputError(None, name, "a whole number " + (">= 0" if name == "transient" else ">= 1"), v)
+    names = {"--input": input, "--output": output, "--reference": reference}
+    csv, cols, t = read_frf_columns(path, names, time)
+    fs = (t.size - 1) / float(t[-1] - t[0])
+    src = cols.get("--reference", cols["--input"])
+    if period_s is None:
+        n = find_period(src, exact="--reference" in cols)
+        if n is None:
+            raise InputError(csv, "--reference" if "--reference" in cols else "--input",
+                             "a periodic signal (the period found from where it repeats)", "no period found",
+                             hint="pass --period")
+    else:
+        if not (np.isfinite(period_s) and period_s > 0):
+            raise InputError(None, "period", "a positive period in s", period_s)
+        n = int(round(period_s * fs))
+        if n < 8 or abs(n - period_s * fs) > 1e-3 * n:
+            raise InputError(None, "period", f"a whole number (>= 8) of sampling steps of {1 / fs:.6g} s",
+                             f"{period_s} s = {period_s * fs:.6g} steps")
+    T = t.size // int(realisations)
+
+    def parts(x):
+        return x[: T * int(realisations)].reshape(int(realisations), T)
+
+    col_of = {"u": input, "y": output, "r": reference}
+    try:
+        frf = estimate_frf(parts(cols["--input"]), parts(cols["--output"]), fs, n,
+                           r=parts(cols["--reference"]) if "--reference" in cols else None, estimator=estimator,
+                           transient_periods=int(transient))
+    except InputError as e:
+        if e.file == "<argument>" and e.field in col_of:
+            raise InputError(csv, f"column {col_of[e.field]!r}", e.expected, e.got, e.hint) from None
+        raise
+    fit = fit_two_inertia(frf) if model == "two_inertia" else None
+    summary = {"file": str(csv), "input": input, "output": output, "reference": reference, "fs_hz": fs,
+               "period_s": n / fs, "period_samples": n, "frf": frf.to_dict(),
+               "model": None if fit is None else fit.to_dict(),
+               "modes": [] if fit is None else [m.to_dict() for m in fit.modes],
+               "files": {"summary": "frf.json", "frf": "frf.csv"}}
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    write_json(out / "frf.json", summary)
+    table = {"f_hz": frf.f_hz, "G_real": frf.G.real, "G_imag": frf.G.imag, "magnitude": frf.magnitude,
+             "phase_rad": frf.phase_rad, "coherence": frf.coherence, "noise": frf.std}
+    if fit is not None:
+        table.update({"model_real": fit.G_fit.real, "model_imag": fit.G_fit.imag})
+    write_csv_columns(out / "frf.csv", table)
+    return summary

@@ -1,0 +1,110 @@
+"""``mocapfj frf``: a closed-loop multisine CSV (independent simulation, tests/ident/frf_sim.py) ->
+JSON with frf / model / modes, frf.json and frf.csv; a recording bundle; bad input as one line and
+exit 2 with nothing written."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from mocapfj.cli import main
+from mocapfj.ident.frf_fit import two_inertia_modes
+from mocapfj.ident.multisine import design_multisine
+from mocapfj.io.csvio import write_csv_columns
+
+from .frf_sim import simulate_multisine
+
+FS = 1 / 0.003
+P = dict(J=0.75, I=1.165, k=1150.0, d=1.0, b=0.8, v=0.3)
+
+
+@pytest.fixture(scope="module")
+def record(tmp_path_factory):
+    ms = design_multisine(FS, 1024, 0.5, 12.0, rms=0.01, seed=5)
+    u, y, r = simulate_multisine(P, [ms], 6, kp=300.0, kd=30.0, noise_sd=1.0, seed=6)
+    d = tmp_path_factory.mktemp("frf")
+    cols = {"time": np.arange(u.shape[1]) / FS, "tau": u[0], "qm": y[0], "qref": r[0]}
+    write_csv_columns(d / "log.csv", cols)
+    return d, cols
+
+
+def _run(capsys, *argv):
+    code = main(["frf", *map(str, argv)])
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+def test_closed_loop_csv(record, capsys, tmp_path):
+    d, _ = record
+    code, out, err = _run(capsys, d / "log.csv", "--input", "tau", "--output", "qm", "--reference", "qref",
+                          "--out", tmp_path / "o", "--json")
+    assert code == 0, err
+    s = json.loads(out)
+    assert s["period_samples"] == 1024                          # found where the reference repeats
+    f = s["frf"]
+    for key in ("frequencies_hz", "magnitude", "phase_rad", "coherence", "noise", "distortion"):
+        assert key in f
+    assert f["estimator"] == "indirect" and len(f["magnitude"]) == len(f["frequencies_hz"])
+    m = s["model"]
+    assert m["name"] == "two_inertia" and set(m["params"]) == {"J", "I", "k", "d", "b", "v"}
+    assert abs(m["params"]["k"]["value"] / P["k"] - 1) < 0.03
+    truth = two_inertia_modes(**P)
+    assert [x["kind"] for x in s["modes"]] == ["antiresonance", "resonance"]
+    for x, (_, f_true, _) in zip(s["modes"], truth):
+        assert abs(x["f_hz"] - f_true) < max(4 * x["f_hz_std"], 0.01 * f_true) and x["f_hz_std"] > 0
+    assert (tmp_path / "o" / "frf.json").is_file() and (tmp_path / "o" / "frf.csv").is_file()
+    code, out, _ = _run(capsys, d / "log.csv", "--input", "tau", "--output", "qm", "--period", 1024 / FS,
+                        "--model", "none", "--out", tmp_path / "o2")
+    assert code == 0 and "harmonic estimator" in out and "wrote" in out
+
+
+def test_recording_bundle(record, capsys, tmp_path):
+    d, cols = record
+    b = tmp_path / "bundle"
+    b.mkdir()
+    write_csv_columns(b / "controller.csv", {"t_s": cols["time"], "tau": cols["tau"], "qm": cols["qm"],
+                                             "qref": cols["qref"]})
+    (b / "recording.toml").write_text('format = "mocapfj.recording/1"\nname = "multisine"\n'
+                                      '[controller]\nfile = "controller.csv"\ntime_column = "t_s"\n')
+    code, out, err = _run(capsys, b, "--input", "tau", "--output", "qm", "--reference", "qref", "--out",
+                          tmp_path / "o", "--json")
+    assert code == 0, err
+    assert abs(json.loads(out)["model"]["params"]["k"]["value"] / P["k"] - 1) < 0.03
+
+
+def _bad(tmp_path, name, cols):
+    write_csv_columns(tmp_path / name, cols)
+    return tmp_path / name
+
+
+def test_bad_input_one_line_exit_2(record, capsys, tmp_path):
+    d, cols = record
+    n2 = 2 * 1024
+    short = _bad(tmp_path, "short.csv", {k: v[:n2] for k, v in cols.items()})
+    nan = dict(cols)
+    nan["qm"] = cols["qm"].copy()
+    nan["qm"][100] = np.nan
+    jitter = dict(cols)
+    jitter["time"] = cols["time"] + np.r_[0, 0, 0.001, np.zeros(cols["time"].size - 3)]
+    noise = dict(cols)
+    noise["tau"] = np.random.default_rng(0).normal(size=cols["tau"].size)
+    cases = [
+        (d / "log.csv", ["--input", "torque"], "--input"),
+        (short, [], "periods"),
+        (_bad(tmp_path, "nan.csv", nan), [], "'qm'"),
+        (_bad(tmp_path, "jitter.csv", jitter), [], "uniform"),
+        (d / "log.csv", ["--period", "1.0001"], "--period"),
+        (_bad(tmp_path, "noise.csv", noise), ["--reference", None], "period"),
+        (tmp_path / "missing.csv", [], "missing.csv"),
+    ]
+    for path, extra, needle in cases:
+        args = {"--input": "tau", "--output": "qm", "--reference": "qref"}
+        for k, v in zip(extra[::2], extra[1::2]):
+            args[k] = v
+        argv = [path] + [x for k, v in args.items() if v is not None for x in (k, v)] + ["--out", tmp_path / "out"]
+        code, out, err = _run(capsys, *argv)
+        assert code == 2, (path, err)
+        assert len(err.strip().splitlines()) == 1 and needle in err, err
+        assert not (tmp_path / "out").exists()
