@@ -345,7 +345,8 @@ def _cmd_algebraic(args) -> int:
     from .pipeline.algebraic import run_algebraic
 
     s = run_algebraic(args.csv, _work(args), output=args.output, input=args.input, time=args.time, start=args.start,
-                      duration=args.duration, window=args.window, offset=not args.no_offset, inertia=args.inertia)
+                      duration=args.duration, window=args.window, offset=not args.no_offset, inertia=args.inertia,
+                      damping=args.damping)
 
     def human(s):
         j = s["joints"][0]
@@ -380,7 +381,7 @@ def _cmd_precompensate(args) -> int:
     from .pipeline.algebraic import run_precompensate
 
     s = run_precompensate(args.csv, _work(args), reference=args.reference, time=args.time, omega0=args.omega0,
-                          zeta=args.zeta, model=args.model, iterations=args.iterations)
+                          zeta=args.zeta, model=args.model, iterations=args.iterations, damping=args.damping)
 
     def human(s):
         return (f"pre-compensated {s['reference']} (omega0 {s['omega0']:.5g} rad/s, zeta {s['zeta']:.4g}): the model's "
@@ -580,6 +581,9 @@ def build_parser() -> argparse.ArgumentParser:
     al.add_argument("--window", type=float, default=None, help="also estimate over sliding windows of this length, s")
     al.add_argument("--no-offset", action="store_true", help="the equilibrium is known: y - u rests at 0")
     al.add_argument("--inertia", type=float, default=None, help="link inertia J, kg m^2: report K = J omega0^2")
+    al.add_argument("--damping", default="auto", choices=["auto", "link", "spring"],
+                    help="damping on the link's velocity (their eq. 9), on the deflection rate, or the better fit "
+                         "(default auto; a free vibration cannot tell them apart)")
     al.add_argument("--out", required=True, help="output directory")
     al.add_argument("--json", action="store_true", help="print a JSON summary on stdout")
     al.set_defaults(func=_cmd_algebraic)
@@ -593,6 +597,8 @@ def build_parser() -> argparse.ArgumentParser:
     pc.add_argument("--zeta", type=float, default=None, help="damping ratio")
     pc.add_argument("--model", default=None, help="algebraic.json from mocapfj algebraic (instead of --omega0/--zeta)")
     pc.add_argument("--iterations", type=int, default=1, help="1: their law; more repeat the correction on the model")
+    pc.add_argument("--damping", default=None, choices=["link", "spring"],
+                    help="the model's damping form (default: the one in --model, else link)")
     pc.add_argument("--out", required=True, help="output directory")
     pc.add_argument("--json", action="store_true", help="print a JSON summary on stdout")
     pc.set_defaults(func=_cmd_precompensate)

@@ -8,7 +8,11 @@ The link of an elastic joint whose motor is held by a stiff position loop obeys 
 y the link angle, u the motor angle (both link side, rad), lambda3 a constant torque / J (gravity,
 friction at rest: the equilibrium is u + lambda3 / lambda2). For the free vibration after a stop
 (u constant) pass the deflection or the link angle alone (u = None): the equilibrium is then
-lambda3 / lambda2.
+lambda3 / lambda2. Their damping acts on the link's velocity (``damping="link"``: a viscous
+friction, the static lag D u' / K at constant speed); with ``damping="spring"`` it acts on the
+deflection rate, y'' + lambda1 (y' - u') + lambda2 (y - u) = lambda3 (no lag at constant speed). A
+free vibration cannot tell the two apart; a window where the motor moves can, and ``"auto"`` keeps
+the one whose model fits the window better. Pre-compensating with the wrong one adds an error.
 
 **Algebraic estimator** (their eq. 11-16, after Fliess and Sira-Ramirez). In the Laplace domain
 the initial conditions are annihilated by d^2/ds^2, and dividing by s^m turns every derivative
@@ -74,6 +78,7 @@ class SecondOrderEstimate:
     noise_sd : rad, the SD of y's noise the SDs were propagated from (model residual RMS)
     fit_pct : 100 (1 - ||y - y_model|| / ||y - mean y||) of the identified model on the segment
     n_samples : int
+    damping : "link" (their eq. 9) or "spring" (module docstring)
     """
 
     method: str
@@ -90,6 +95,7 @@ class SecondOrderEstimate:
     noise_sd: float
     fit_pct: float
     n_samples: int
+    damping: str = "link"
 
     @property
     def f0_hz(self) -> float:
@@ -108,7 +114,8 @@ class SecondOrderEstimate:
                 "f0_hz_std": self.f0_hz_std, "zeta": self.zeta, "zeta_std": self.zeta_std,
                 "lambda1": self.lambda1, "lambda2": self.lambda2, "equilibrium": self.equilibrium,
                 "t_start": self.t_start, "t_end": self.t_end, "window_s": self.t_end - self.t_start,
-                "noise_sd": self.noise_sd, "fit_pct": self.fit_pct, "n_samples": self.n_samples}
+                "noise_sd": self.noise_sd, "fit_pct": self.fit_pct, "n_samples": self.n_samples,
+                "damping": self.damping}
 
 
 @dataclass(frozen=True)
@@ -186,15 +193,17 @@ def quadrature_kernels(n: int, orders: tuple[int, ...]) -> dict[tuple[int, int],
     return out
 
 
-def _equations(Q: dict, Y: np.ndarray, U: np.ndarray | None, orders, offset: bool):
+def _equations(Q: dict, Y: np.ndarray, U: np.ndarray | None, orders, offset: bool, spring: bool = False):
     """A (..., M, p), b (..., M) of the equations for windows Y (..., n), and the per-sample
-    weight vectors (M, p, n) / (M, n) of the y-dependent entries (for the noise propagation)."""
+    weight vectors (M, p, n) / (M, n) of the y-dependent entries (for the noise propagation).
+    `spring`: the damping acts on y' - u' (the lambda1 column integrates y - u)."""
     rows_a, rows_b, wa, wb = [], [], [], []
+    Y1 = Y - U if (spring and U is not None) else Y
     for m in orders:
         a1 = -(Q[(m - 1, 2)] + 2 * Q[(m, 1)])
         a2 = -Q[(m, 2)]
         bb = Q[(m - 2, 2)] + 4 * Q[(m - 1, 1)] + 2 * Q[(m, 0)]
-        cols = [Y @ a1, Y @ a2 - (0.0 if U is None else U @ a2)]
+        cols = [Y1 @ a1, Y @ a2 - (0.0 if U is None else U @ a2)]
         w = [a1, a2]
         if offset:
             c = 2.0 / math.factorial(m + 2)
@@ -216,27 +225,33 @@ def _orders(offset: bool, orders) -> tuple[int, ...]:
 
 
 def second_order_response(t, omega0: float, zeta: float, u=None, *, y0: float = 0.0, v0: float = 0.0,
-                          lambda3: float = 0.0) -> np.ndarray:
-    """y (T,) of y'' + 2 zeta omega0 y' + omega0^2 (y - u) = lambda3 from y(t0) = y0, y'(t0) = v0,
-    u (T,) rad (linear between samples; None = 0)."""
+                          lambda3: float = 0.0, damping: str = "link") -> np.ndarray:
+    """y (T,) of y'' + 2 zeta omega0 y' + omega0^2 (y - u) = lambda3 (``damping="link"``) or
+    y'' + 2 zeta omega0 (y' - u') + omega0^2 (y - u) = lambda3 (``"spring"``) from y(t0) = y0,
+    y'(t0) = v0, u (T,) rad (linear between samples; None = 0)."""
     t = np.asarray(t, dtype=np.float64)
     l1, l2 = 2 * zeta * omega0, omega0 ** 2
-    A = np.array([[0.0, 1.0], [-l2, -l1]])
-    B = np.array([[0.0, 0.0], [l2, 1.0]])
-    sys = signal.StateSpace(A, B, np.array([[1.0, 0.0]]), np.zeros((1, 2)))
     uu = np.zeros(t.size) if u is None else np.asarray(u, dtype=np.float64)
-    _, y, _ = signal.lsim(sys, np.column_stack([uu, np.full(t.size, lambda3)]), t - t[0], X0=[y0, v0])
+    A = np.array([[0.0, 1.0], [-l2, -l1]])
+    if damping == "spring":              # state (y, y' - l1 u): transfer (l1 s + l2) / (s^2 + l1 s + l2)
+        B = np.array([[l1, 0.0], [l2 - l1 ** 2, 1.0]])
+        x0 = [y0, v0 - l1 * uu[0]]
+    else:
+        B = np.array([[0.0, 0.0], [l2, 1.0]])
+        x0 = [y0, v0]
+    sys = signal.StateSpace(A, B, np.array([[1.0, 0.0]]), np.zeros((1, 2)))
+    _, y, _ = signal.lsim(sys, np.column_stack([uu, np.full(t.size, lambda3)]), t - t[0], X0=x0)
     return np.asarray(y, dtype=np.float64)
 
 
-def _refit(t, y, u, omega0, zeta, offset):
+def _refit(t, y, u, omega0, zeta, offset, damping="link"):
     """Least-squares initial state (and lambda3) of the identified model on the segment: the
     model's response, its residual RMS (with the degrees of freedom of all fitted parameters)
     and the fitted lambda3."""
     cols = [second_order_response(t, omega0, zeta, None, y0=1.0), second_order_response(t, omega0, zeta, None, v0=1.0)]
     if offset:
         cols.append(second_order_response(t, omega0, zeta, None, lambda3=1.0))
-    base = np.zeros(t.size) if u is None else second_order_response(t, omega0, zeta, u)
+    base = np.zeros(t.size) if u is None else second_order_response(t, omega0, zeta, u, damping=damping)
     X = np.column_stack(cols)
     c, *_ = np.linalg.lstsq(X, y - base, rcond=None)
     model = base + X @ c
@@ -262,8 +277,8 @@ def _to_omega_zeta(l1, l2, C_l):
     return w, z, Jm @ C_l @ np.swapaxes(Jm, -1, -2)
 
 
-def algebraic_estimate(t, y, u=None, *, offset: bool = True, orders=None, noise_sd: float | None = None
-                       ) -> SecondOrderEstimate:
+def algebraic_estimate(t, y, u=None, *, offset: bool = True, orders=None, noise_sd: float | None = None,
+                       damping: str = "auto") -> SecondOrderEstimate:
     """omega0 and zeta from one segment by the algebraic estimator (Oueslati et al. 2012, eq. 13-16).
 
     Parameters
@@ -277,6 +292,8 @@ def algebraic_estimate(t, y, u=None, *, offset: bool = True, orders=None, noise_
     orders : the divisors s^m of the equations (default 3, 4 and 5 with the offset: their eq. 13-14
         and one more); more than the unknowns gives a least-squares solution.
     noise_sd : rad, the SD of y's noise; default the identified model's residual RMS on the segment.
+    damping : "link" (their eq. 9), "spring", or "auto" (with u: the one whose model fits the
+        segment better; without u they coincide and "link" is reported)
 
     Raises
     ------
@@ -286,6 +303,22 @@ def algebraic_estimate(t, y, u=None, *, offset: bool = True, orders=None, noise_
         above the noise).
     """
     t, y, u = _check_signals(t, y, u)
+    if damping not in ("link", "spring", "auto"):
+        raise InputError(None, "damping", '"link", "spring" or "auto"', repr(damping))
+    if damping == "auto":
+        if u is None or np.ptp(u) == 0:
+            damping = "link"
+        else:
+            fits = []
+            for form in ("link", "spring"):
+                try:
+                    fits.append(algebraic_estimate(t, y, u, offset=offset, orders=orders, noise_sd=noise_sd,
+                                                   damping=form))
+                except InputError as e:
+                    err = e
+            if not fits:
+                raise err
+            return max(fits, key=lambda e: e.fit_pct)
     orders = _orders(offset, orders)
     T = float(t[-1] - t[0])
     ref = float(y[0]) if u is None else float(u[0])
@@ -293,7 +326,7 @@ def algebraic_estimate(t, y, u=None, *, offset: bool = True, orders=None, noise_
     ys = (y - ref) / scale
     us = None if u is None else (u - ref) / scale
     Q = quadrature_kernels(t.size, orders)
-    A, b, wa, wb = _equations(Q, ys, us, orders, offset)
+    A, b, wa, wb = _equations(Q, ys, us, orders, offset, spring=damping == "spring")
     if not np.isfinite(A).all() or np.linalg.cond(A) > 1e12:
         raise InputError(None, "y", "a segment that determines omega0 and zeta (an oscillation)",
                          "a singular system", hint="take a longer segment or one after a motion change")
@@ -304,7 +337,7 @@ def algebraic_estimate(t, y, u=None, *, offset: bool = True, orders=None, noise_
                          hint="take a longer segment or one after a motion change")
     l1, l2 = float(l1), float(l2)
     omega0, zeta = math.sqrt(l2), l1 / (2 * math.sqrt(l2))
-    model, rms, lam3 = _refit(t, y, u, omega0, zeta, offset)
+    model, rms, lam3 = _refit(t, y, u, omega0, zeta, offset, damping)
     fit = _fit_pct(y, model)
     if not fit >= MIN_FIT_PCT:
         raise InputError(None, "y", f"a segment whose oscillation the model explains (fit >= {MIN_FIT_PCT:g} %)",
@@ -321,15 +354,18 @@ def algebraic_estimate(t, y, u=None, *, offset: bool = True, orders=None, noise_
     return SecondOrderEstimate(method="algebraic", omega0=omega0, omega0_std=float(np.sqrt(C[0, 0])), zeta=zeta,
                                zeta_std=float(np.sqrt(C[1, 1])), lambda1=float(l1), lambda2=float(l2), cov=C,
                                equilibrium=lam3 / l2 if offset else float("nan"), t_start=float(t[0]),
-                               t_end=float(t[-1]), noise_sd=sd, fit_pct=fit, n_samples=int(t.size))
+                               t_end=float(t[-1]), noise_sd=sd, fit_pct=fit, n_samples=int(t.size), damping=damping)
 
 
 def algebraic_sliding(t, y, u=None, *, window_s: float, offset: bool = True, orders=None,
-                      noise_sd: float | None = None) -> SlidingEstimate:
+                      noise_sd: float | None = None, damping: str = "link") -> SlidingEstimate:
     """The algebraic estimator on every window of `window_s` seconds sliding by one sample (one
     matrix product for all windows). The SDs of each window are propagated from `noise_sd`
-    (default: the residual RMS of the median model refitted to the whole record)."""
+    (default: the residual RMS of the median model refitted to the whole record). `damping`:
+    "link" or "spring" (see :func:`algebraic_estimate`)."""
     t, y, u = _check_signals(t, y, u)
+    if damping not in ("link", "spring"):
+        raise InputError(None, "damping", '"link" or "spring"', repr(damping))
     if not (np.isfinite(window_s) and window_s > 0):
         raise InputError(None, "window_s", "a positive window length in s", window_s)
     orders = _orders(offset, orders)
@@ -344,7 +380,7 @@ def algebraic_sliding(t, y, u=None, *, window_s: float, offset: bool = True, ord
     Y = np.lib.stride_tricks.sliding_window_view((y - ref) / scale, n)
     U = None if u is None else np.lib.stride_tricks.sliding_window_view((u - ref) / scale, n)
     Q = quadrature_kernels(n, orders)
-    A, b, wa, wb = _equations(Q, Y, U, orders, offset)
+    A, b, wa, wb = _equations(Q, Y, U, orders, offset, spring=damping == "spring")
     AtA = np.swapaxes(A, -1, -2) @ A
     with np.errstate(all="ignore"):
         ok = np.linalg.cond(AtA) < 1e24
@@ -360,7 +396,7 @@ def algebraic_sliding(t, y, u=None, *, window_s: float, offset: bool = True, ord
     zeta = np.where(valid, l1, np.nan) / (2 * omega0)
     w_med, z_med = float(np.nanmedian(omega0)), float(np.nanmedian(zeta))
     if noise_sd is None:
-        model, rms, _ = _refit(t, y, u, w_med, z_med, offset)
+        model, rms, _ = _refit(t, y, u, w_med, z_med, offset, damping)
         noise_sd = rms
     Apinv = np.full((Y.shape[0], A.shape[-1], A.shape[-2]), np.nan)
     Apinv[valid] = np.linalg.pinv(A[valid])
@@ -384,11 +420,49 @@ def zeta_from_decrement(delta: float, *, exact: bool = True) -> float:
     return delta / math.sqrt(4 * math.pi ** 2 + delta ** 2) if exact else delta / (2 * math.pi)
 
 
-def _extrema(t, y, half: int):
-    """Times, values, and the SD factors of the values and times (times the noise SD), of the local
-    extrema of y: a quadratic fitted to the 2 half + 1 samples around each sign change of the slope."""
+def _candidates(t, y):
+    """Extremum candidates of a decaying oscillation: (indices, half-width of the local fits, noise
+    SD). The period from the spectrum's peak; a Savitzky-Golay smoothing over a sixth of it; the
+    sign changes of its slope, merged until maxima and minima alternate at least a quarter period
+    apart (noise wiggles near an extremum are not extrema)."""
+    from scipy.signal import savgol_filter
+
+    h = float(t[1] - t[0])
     n = y.size
-    idx = np.flatnonzero((y[1:-1] - y[:-2]) * (y[2:] - y[1:-1]) < 0) + 1
+    spec = np.abs(np.fft.rfft((y - y.mean()) * np.hanning(n), 8 * n))
+    f = np.fft.rfftfreq(8 * n, h)
+    f_peak = f[1 + int(np.argmax(spec[1:]))]
+    period = 1.0 / f_peak
+    half = int(np.clip(round(period / h / 12), 1, 50))
+    sm = savgol_filter(y, 2 * half + 1, 2) if 2 * half + 1 <= n else y
+    if 2 * half + 1 <= n:
+        h0 = savgol_filter(np.eye(2 * half + 1)[half], 2 * half + 1, 2, mode="interp")[half]
+        sd = float(np.std(y - sm) / math.sqrt(max(1 - h0, 1e-3)))
+    else:
+        sd = float(np.std(np.diff(y, 2)) / math.sqrt(6))
+    idx = np.flatnonzero((sm[1:-1] - sm[:-2]) * (sm[2:] - sm[1:-1]) < 0) + 1
+    kept: list[int] = []
+    for i in idx:
+        is_max = sm[i] > sm[i - 1]
+        if kept:
+            j = kept[-1]
+            same = (sm[j] > sm[j - 1]) == is_max
+            close = (t[i] - t[j]) < 0.25 * period
+            if same or close:
+                if same and ((sm[i] > sm[j]) == is_max):
+                    kept[-1] = i            # the more extreme of two of a kind
+                elif close and not same:
+                    kept.pop()              # a wiggle: drop both
+                continue
+        kept.append(int(i))
+    return np.array(kept, dtype=int), half, sd
+
+
+def _extrema(t, y, idx, half: int):
+    """Times, values, and the SD factors of the values and times (times the noise SD), of the
+    extrema at candidate indices idx: a quadratic fitted to the 2 half + 1 samples around each."""
+    n = y.size
+    idx = np.asarray(idx, dtype=int)
     idx = idx[(idx >= half) & (idx < n - half)]
     if idx.size == 0:
         return np.empty(0), np.empty(0), np.empty(0), np.empty(0)
@@ -418,26 +492,23 @@ def log_decrement(t, y, *, noise_sd: float | None = None, min_swing: float | Non
     ----------
     t : (T,) s, uniformly sampled; y : (T,) rad, a decaying oscillation about a constant
     noise_sd : rad, default the residual RMS of the identified model refitted to the segment
-    min_swing : rad, swings between successive extrema smaller than this are left out (default 10
-        noise SDs from the samples' second differences, at least 1 % of the largest swing)
+    min_swing : rad, swings between successive extrema smaller than this are left out (default 8
+        noise SDs, the noise from the residual of a smoothing over a sixth of the period; at least
+        1 % of the largest swing)
 
     Needs at least 3 extrema (2 swings). SDs: straight-line fits through ln D_i and the extremum
     times, weighted by the propagated noise, inflated by the square root of the reduced chi-square
     when it exceeds 1 (model error: an oscillation that is not a damped sinusoid).
     """
     t, y, _ = _check_signals(t, y, None)
-    h = float(t[1] - t[0])
-    half = 2                                     # then sized to a sixth of the half period
-    tx, vx, fac, tfac = _extrema(t, y, half)
-    if tx.size >= 2:
-        half = int(np.clip(round(np.median(np.diff(tx)) / h / 6), 1, 6))
-        tx, vx, fac, tfac = _extrema(t, y, half)
+    idx, half, sd_sm = _candidates(t, y)
+    tx, vx, fac, tfac = _extrema(t, y, idx, half)
     if tx.size < 3:
         raise InputError(None, "y", "a decaying oscillation with at least 3 extrema (about 1.5 periods)",
                          f"{tx.size} extrema", hint="take a longer segment after the stop")
-    sd0 = float(np.std(np.diff(y, 2)) / math.sqrt(6)) if noise_sd is None else float(noise_sd)
+    sd0 = sd_sm if noise_sd is None else float(noise_sd)
     D = np.abs(np.diff(vx))
-    floor = max(10 * sd0, 0.01 * D.max()) if min_swing is None else float(min_swing)
+    floor = max(8 * sd0, 0.01 * D.max()) if min_swing is None else float(min_swing)
     keep = np.flatnonzero(D > floor)
     # keep the first run of consecutive swings above the floor
     if keep.size:

@@ -40,6 +40,7 @@ class Precompensation:
     predicted_error_after : (T,) rad, the same for the command
     omega0, zeta : the model used
     iterations : int
+    damping : "link" or "spring" (:mod:`.algebraic`)
     """
 
     t: np.ndarray
@@ -50,11 +51,12 @@ class Precompensation:
     omega0: float
     zeta: float
     iterations: int
+    damping: str = "link"
 
     def to_dict(self) -> dict:
         b = deflection_amplitude(self.predicted_error_before)
         a = deflection_amplitude(self.predicted_error_after)
-        return {"omega0": self.omega0, "zeta": self.zeta, "iterations": self.iterations,
+        return {"omega0": self.omega0, "zeta": self.zeta, "iterations": self.iterations, "damping": self.damping,
                 "n_samples": int(self.t.size), "predicted_peak_before": b["peak"],
                 "predicted_peak_after": a["peak"], "predicted_rms_before": b["rms"], "predicted_rms_after": a["rms"],
                 "predicted_peak_ratio": b["peak"] / a["peak"] if a["peak"] > 0 else float("inf"),
@@ -67,7 +69,8 @@ def deflection_amplitude(e) -> dict:
     return {"peak": float(np.max(np.abs(e))), "rms": float(np.sqrt(np.mean(e ** 2)))}
 
 
-def precompensate(t, reference, omega0: float, zeta: float, *, iterations: int = 1) -> Precompensation:
+def precompensate(t, reference, omega0: float, zeta: float, *, iterations: int = 1,
+                  damping: str = "link") -> Precompensation:
     """The pre-compensated command for `reference` (Oueslati et al. 2012, eq. 17).
 
     Parameters
@@ -75,6 +78,8 @@ def precompensate(t, reference, omega0: float, zeta: float, *, iterations: int =
     t : (T,) s, increasing; reference : (T,) rad (link side), starting at rest
     omega0 : rad/s, zeta : 1, the identified model (e.g. :func:`.algebraic.algebraic_estimate`)
     iterations : 1 for their law; more repeat the correction on the model
+    damping : "link" (their eq. 9) or "spring": the form the estimate was made with
+        (``SecondOrderEstimate.damping``)
     """
     dims: dict = {}
     t = check_array(t, "t", ("T",), dims=dims)
@@ -84,9 +89,11 @@ def precompensate(t, reference, omega0: float, zeta: float, *, iterations: int =
     omega0 = check_scalar(omega0, "omega0", positive=True)
     zeta = check_scalar(zeta, "zeta", nonneg=True)
     iterations = check_int(iterations, "iterations", lo=1, hi=50)
+    if damping not in ("link", "spring"):
+        raise InputError(None, "damping", '"link" or "spring"', repr(damping))
 
     def link(u):
-        return second_order_response(t, omega0, zeta, u, y0=float(u[0]))
+        return second_order_response(t, omega0, zeta, u, y0=float(u[0]), damping=damping)
 
     before = link(r) - r
     cmd = r.copy()
@@ -95,7 +102,7 @@ def precompensate(t, reference, omega0: float, zeta: float, *, iterations: int =
         cmd = cmd - err
         err = link(cmd) - r
     return Precompensation(t=t, reference=r, command=cmd, predicted_error_before=before, predicted_error_after=err,
-                           omega0=omega0, zeta=zeta, iterations=iterations)
+                           omega0=omega0, zeta=zeta, iterations=iterations, damping=damping)
 
 
 def jerk_limited_profile(t, start: float, stop: float, v_max: float, a_max: float, j_max: float,

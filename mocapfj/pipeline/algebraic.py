@@ -39,7 +39,7 @@ def _segment(path, t, start, duration):
 
 def run_algebraic(csv, out: str | Path, output: str, input: str | None = None, time: str = "time",
                   start: float | None = None, duration: float | None = None, window: float | None = None,
-                  offset: bool = True, inertia: float | None = None) -> dict:
+                  offset: bool = True, inertia: float | None = None, damping: str = "auto") -> dict:
     """``mocapfj algebraic``: omega0 and zeta of a joint's oscillation in the segment
     [start, start + duration] of a CSV, by the algebraic estimator and (for a free vibration) the
     logarithmic decrement; with `window` also over sliding windows of the whole record.
@@ -61,7 +61,7 @@ def run_algebraic(csv, out: str | Path, output: str, input: str | None = None, t
         _finite(csv, name, x)
     joint: dict = {"name": output, "input": input, "segment_s": [float(t[0]), float(t[-1])]}
     try:
-        a = algebraic_estimate(t, y, u, offset=offset)
+        a = algebraic_estimate(t, y, u, offset=offset, damping=damping)
     except InputError as e:
         raise InputError(csv, f"column {output!r} ({e.field})", e.expected, e.got, e.hint) from None
     joint["algebraic"] = a.to_dict()
@@ -82,11 +82,11 @@ def run_algebraic(csv, out: str | Path, output: str, input: str | None = None, t
             k, k_std = e.stiffness(inertia)
             joint[key]["stiffness"] = k
             joint[key]["stiffness_std"] = k_std
-            joint[key]["damping"] = 2 * e.zeta * math.sqrt(k * inertia)
+            joint[key]["damping_coefficient"] = 2 * e.zeta * math.sqrt(k * inertia)
     if window is not None:
         for name, x in ((time, t_all), (output, y_all)) + (() if u_all is None else ((input, u_all),)):
             _finite(csv, name, x)
-        s = algebraic_sliding(t_all, y_all, u_all, window_s=window, offset=offset)
+        s = algebraic_sliding(t_all, y_all, u_all, window_s=window, offset=offset, damping=a.damping)
         joint["sliding"] = s.to_dict()
         write_csv_columns(out / "sliding.csv", {"t_end": s.t_end, "omega0": s.omega0, "omega0_std": s.omega0_std,
                                                 "zeta": s.zeta, "zeta_std": s.zeta_std})
@@ -96,10 +96,11 @@ def run_algebraic(csv, out: str | Path, output: str, input: str | None = None, t
 
 
 def run_precompensate(csv, out: str | Path, reference: str, time: str = "time", omega0: float | None = None,
-                      zeta: float | None = None, model: str | Path | None = None, iterations: int = 1) -> dict:
+                      zeta: float | None = None, model: str | Path | None = None, iterations: int = 1,
+                      damping: str | None = None) -> dict:
     """``mocapfj precompensate``: the motor command of Oueslati et al. (2012), eq. 17, for the
     reference column of a CSV, from omega0 and zeta (given, or the algebraic estimate in an
-    algebraic.json). Writes OUT/command.csv (time, reference, command, and the link's error the
+    algebraic.json, with the damping form it chose). Writes OUT/command.csv (time, reference, command, and the link's error the
     model predicts before and after) and OUT/precompensate.json."""
     from ..ident.precompensation import precompensate
     from ..io import read_json
@@ -111,6 +112,7 @@ def run_precompensate(csv, out: str | Path, reference: str, time: str = "time", 
             est = m["joints"][0]["algebraic"]
             omega0 = float(est["omega0"]) if omega0 is None else omega0
             zeta = float(est["zeta"]) if zeta is None else zeta
+            damping = str(est.get("damping", "link")) if damping is None else damping
         except (KeyError, IndexError, TypeError, ValueError):
             raise InputError(model, "joints[0].algebraic", "an algebraic.json written by mocapfj algebraic",
                              "no omega0 / zeta there") from None
@@ -121,7 +123,7 @@ def run_precompensate(csv, out: str | Path, reference: str, time: str = "time", 
     r = _column(csv, cols, reference)
     _finite(csv, time, t)
     _finite(csv, reference, r)
-    p = precompensate(t, r, omega0, zeta, iterations=iterations)
+    p = precompensate(t, r, omega0, zeta, iterations=iterations, damping=damping or "link")
     write_csv_columns(out / "command.csv", {time: t, reference: r, "command": p.command,
                                             "predicted_error_before": p.predicted_error_before,
                                             "predicted_error_after": p.predicted_error_after})

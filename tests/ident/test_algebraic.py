@@ -38,6 +38,11 @@ def test_exact_without_noise_free_and_forced():
     e = algebraic_estimate(t, y, u, offset=False)
     assert e.omega0 == pytest.approx(W2, rel=1e-7) and e.zeta == pytest.approx(ZETA2, rel=1e-6)
     assert e.stiffness(J2)[0] == pytest.approx(K2, rel=1e-6)
+    # damping on the deflection rate instead of the link: "auto" tells the forms apart when u moves
+    ys = second_order_response(t, W2, ZETA2, u, y0=0.3, v0=0.1, damping="spring")
+    e = algebraic_estimate(t, ys, u)
+    assert e.damping == "spring" and e.zeta == pytest.approx(ZETA2, rel=1e-5)
+    assert algebraic_estimate(t, ys, u, damping="link").fit_pct < e.fit_pct
 
 
 def test_staubli_from_80_and_100_ms_at_the_papers_noise():
