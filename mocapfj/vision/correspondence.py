@@ -30,6 +30,7 @@ Conventions: docs/conventions.md.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -41,9 +42,6 @@ from .triangulate import (Triangulation, dlt_feature_matrix, rig_parameters, sol
                           undistortion_table)
 
 __all__ = ["Candidates", "match_detections"]
-
-_BIG = 1 << 15       # key = frame * _BIG + x: pixel columns below 16384
-
 
 @dataclass(frozen=True, eq=False)
 class Candidates:
@@ -94,91 +92,144 @@ def _essential(rig: Rig, a: int, b: int) -> np.ndarray:
     return tx @ R
 
 
-def _ragged_pairs(fa: np.ndarray, fb: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """All (i, j) with fa[i] == fb[j]; fb sorted."""
-    lo = np.searchsorted(fb, fa, "left")
-    hi = np.searchsorted(fb, fa, "right")
-    cnt = hi - lo
-    i = np.repeat(np.arange(fa.size), cnt)
-    starts = np.cumsum(cnt) - cnt
-    j = np.arange(i.size) - np.repeat(starts, cnt) + np.repeat(lo, cnt)
-    return i, j
+def _edges_py(fs_a, fs_b, free_a, free_b, nrm_a, nrm_b, E, f_a, f_b, eps, out_i, out_j):  # pragma: no cover - compiled
+    """Free detection pairs of the same frame within eps px of each other's epipolar lines, frame
+    by frame (compiled by :func:`_kernels`); writes them when out_i is long enough, returns the
+    count. The line in b is E x_a, the line in a E^T x_b (normalised homogeneous coordinates),
+    distances in pixels with the focal lengths f_a, f_b."""
+    cnt = 0
+    cap = out_i.shape[0]
+    for f in range(fs_a.shape[0] - 1):
+        b0, b1 = fs_b[f], fs_b[f + 1]
+        if b0 == b1:
+            continue
+        for i in range(fs_a[f], fs_a[f + 1]):
+            if not free_a[i]:
+                continue
+            x0, x1 = nrm_a[i, 0], nrm_a[i, 1]
+            l0 = E[0, 0] * x0 + E[0, 1] * x1 + E[0, 2]
+            l1 = E[1, 0] * x0 + E[1, 1] * x1 + E[1, 2]
+            l2 = E[2, 0] * x0 + E[2, 1] * x1 + E[2, 2]
+            nb = math.sqrt(l0 * l0 + l1 * l1)
+            for j in range(b0, b1):
+                if not free_b[j]:
+                    continue
+                y0, y1 = nrm_b[j, 0], nrm_b[j, 1]
+                alg = abs(y0 * l0 + y1 * l1 + l2)
+                if not (alg / nb * f_b < eps):
+                    continue
+                m0 = E[0, 0] * y0 + E[1, 0] * y1 + E[2, 0]
+                m1 = E[0, 1] * y0 + E[1, 1] * y1 + E[2, 1]
+                if alg / math.sqrt(m0 * m0 + m1 * m1) * f_a < eps:
+                    if cnt < cap:
+                        out_i[cnt] = i
+                        out_j[cnt] = j
+                    cnt += 1
+    return cnt
+
+
+def _nearest_py(fs, free, xy, qf, qxy, gate, out, dist):  # pragma: no cover - compiled
+    """For each query (dense frame qf, pixel qxy), the free detection of one camera within `gate`
+    px when it is the only one there (detections sorted by frame, then x): index or -1, distance."""
+    for n in range(qf.shape[0]):
+        out[n] = -1
+        dist[n] = np.inf
+        x, y = qxy[n, 0], qxy[n, 1]
+        if not (np.isfinite(x) and np.isfinite(y)):
+            continue
+        f = qf[n]
+        count = 0
+        best = -1
+        bd = np.inf
+        for j in range(fs[f], fs[f + 1]):
+            dx = xy[j, 0] - x
+            if dx < -gate:
+                continue
+            if dx > gate:
+                break
+            if not free[j]:
+                continue
+            dy = xy[j, 1] - y
+            d = math.sqrt(dx * dx + dy * dy)
+            if d < gate:
+                count += 1
+                if d < bd:
+                    bd = d
+                    best = j
+        if count == 1:
+            out[n] = best
+            dist[n] = bd
+
+
+_EDGES = _NEAREST = None
+
+
+def _kernels():
+    """The compiled epipolar pairing and support search (numba, imported on first use): a frame
+    holds a dozen blobs per camera, and numpy's all-pairs arrays of every frame at once cost more
+    than the pairs themselves."""
+    global _EDGES, _NEAREST
+    if _EDGES is None:
+        from numba import njit
+        _EDGES = njit(cache=True)(_edges_py)
+        _NEAREST = njit(cache=True)(_nearest_py)
+    return _EDGES, _NEAREST
 
 
 class _Pool:
-    """The detections, per camera sorted by (frame, x), with an 'unassigned' mask."""
+    """The detections, per camera sorted by (frame, x), with an 'unassigned' mask; frames are
+    numbered densely (``fidx``) and ``fstart[c][f]`` is camera c's first detection of frame f."""
 
     def __init__(self, rig: Rig, det: Detections, ok: np.ndarray):
         self.C = len(rig.cameras)
-        self.rows, self.frame, self.xy, self.nrm, self.free = [], [], [], [], []
+        self.rows, self.frame, self.xy, self.nrm, self.free, self.fidx, self.fstart = [], [], [], [], [], [], []
+        frames, dense = np.unique(det.frame, return_inverse=True)
+        dense = dense.ravel()
+        self.n_frames = int(frames.size)
+        # one order for all cameras: (camera, frame, x), as two stable sorts (x, then an integer key)
+        by_x = np.argsort(det.xy_px[:, 0], kind="stable")
+        order = by_x[np.argsort((det.camera.astype(np.int64) * self.n_frames + dense)[by_x], kind="stable")]
+        order = order[ok[order]]
+        cams = det.camera[order]
+        bounds = np.searchsorted(cams, np.arange(self.C + 1))
         for c in range(self.C):
-            rows = np.flatnonzero(ok & (det.camera == c))
-            order = np.lexsort((det.xy_px[rows, 0], det.frame[rows]))
-            rows = rows[order]
+            rows = order[bounds[c]:bounds[c + 1]]
             self.rows.append(rows)
             self.frame.append(det.frame[rows])
-            self.xy.append(det.xy_px[rows])
-            self.nrm.append(undistortion_table(rig.cameras[c]).normalized(det.xy_px[rows]))
+            self.fidx.append(dense[rows])
+            self.fstart.append(np.searchsorted(self.fidx[c], np.arange(self.n_frames + 1)))
+            self.xy.append(np.ascontiguousarray(det.xy_px[rows]))
+            self.nrm.append(undistortion_table(rig.cameras[c]).normalized(self.xy[c]))
             self.free.append(np.isfinite(self.nrm[c][:, 0]))
 
     def free_index(self, c: int) -> np.ndarray:
         return np.flatnonzero(self.free[c])
 
-    def nearest(self, c: int, frame: np.ndarray, xy: np.ndarray, gate: float) -> tuple[np.ndarray, np.ndarray]:
-        """The free detection of camera c in `frame` within `gate` px of `xy`, when it is the only
-        one there: (index or -1, distance). Two blobs within the gate (markers that nearly overlap
-        in this camera) support nothing: either could be the marker's."""
-        idx = self.free_index(c)
-        out = np.full(frame.size, -1)
-        dist = np.full(frame.size, np.inf)
-        if not idx.size or not frame.size:
-            return out, dist
-        keys = self.frame[c][idx] * _BIG + self.xy[c][idx, 0]
-        with np.errstate(invalid="ignore"):
-            q_ok = np.isfinite(xy).all(axis=1) & (xy[:, 0] > -gate - 1) & (xy[:, 0] < _BIG - gate - 1)
-        q = np.where(q_ok, frame * _BIG + np.nan_to_num(xy[:, 0]), -1e18)
-        lo = np.searchsorted(keys, q - gate, "left")
-        hi = np.searchsorted(keys, q + gate, "right")
-        hi = np.where(q_ok, hi, lo)
-        count = np.zeros(frame.size, int)
-        for k in range(int((hi - lo).max(initial=0))):
-            j = lo + k
-            live = j < hi
-            jj = idx[np.minimum(j, idx.size - 1)]
-            d = np.linalg.norm(self.xy[c][jj] - xy, axis=1)
-            inside = live & (d < gate)
-            count += inside
-            better = inside & (d < dist)
-            out[better] = jj[better]
-            dist[better] = d[better]
-        out[count > 1] = -1
-        dist[count > 1] = np.inf
+    def nearest(self, c: int, fidx: np.ndarray, xy: np.ndarray, gate: float) -> tuple[np.ndarray, np.ndarray]:
+        """The free detection of camera c in dense frame `fidx` within `gate` px of `xy`, when it is
+        the only one there: (index or -1, distance). Two blobs within the gate (markers that nearly
+        overlap in this camera) support nothing: either could be the marker's."""
+        out = np.empty(fidx.size, np.int64)
+        dist = np.empty(fidx.size)
+        _kernels()[1](self.fstart[c], self.free[c], self.xy[c], fidx, np.ascontiguousarray(xy, dtype=np.float64),
+                      float(gate), out, dist)
         return out, dist
 
 
 def _epipolar_edges(rig, pool: _Pool, a: int, b: int, eps_px: float):
     """Free detection pairs (index in a, index in b) of the same frame within eps_px of each
     other's epipolar lines (both images)."""
-    ia, ib = pool.free_index(a), pool.free_index(b)
-    if not ia.size or not ib.size:
-        return np.zeros(0, int), np.zeros(0, int)
-    i, j = _ragged_pairs(pool.frame[a][ia], pool.frame[b][ib])
-    if not i.size:
-        return np.zeros(0, int), np.zeros(0, int)
-    ia, ib = ia[i], ib[j]
+    edges = _kernels()[0]
     E = _essential(rig, a, b)
-    xa = np.column_stack([pool.nrm[a][ia], np.ones(ia.size)])
-    xb = np.column_stack([pool.nrm[b][ib], np.ones(ib.size)])
-    lb = xa @ E.T                               # line in b
-    la = xb @ E                                 # line in a
-    alg = np.abs(np.einsum("ni,ni->n", xb, lb))
-    fa = rig.cameras[a].K[0, 0]
-    fb = rig.cameras[b].K[0, 0]
-    with np.errstate(invalid="ignore", divide="ignore"):
-        db = alg / np.hypot(lb[:, 0], lb[:, 1]) * fb
-        da = alg / np.hypot(la[:, 0], la[:, 1]) * fa
-    keep = (db < eps_px) & (da < eps_px)
-    return ia[keep], ib[keep]
+    args = (pool.fstart[a], pool.fstart[b], pool.free[a], pool.free[b], pool.nrm[a], pool.nrm[b], E,
+            float(rig.cameras[a].K[0, 0]), float(rig.cameras[b].K[0, 0]), float(eps_px))
+    guess = 2 * int(min(pool.free[a].sum(), pool.free[b].sum())) + 16
+    ia, ib = np.empty(guess, np.int64), np.empty(guess, np.int64)
+    n = edges(*args, ia, ib)
+    if n > guess:
+        ia, ib = np.empty(n, np.int64), np.empty(n, np.int64)
+        edges(*args, ia, ib)
+    return ia[:n], ib[:n]
 
 
 def _two_view_points(rig, params, pool, a, b, ia, ib):
@@ -284,6 +335,7 @@ def match_detections(rig: Rig, det: Detections, *, sigma_px: float | None = None
             X, ok = _two_view_points(rig, params, pool, a, b, ia, ib)
             ia, ib, X = ia[ok], ib[ok], X[ok]
             fr = pool.frame[a][ia]
+            fi = pool.fidx[a][ia]
             sets = np.full((C, ia.size), -1)
             sets[a], sets[b] = ia, ib
             cost = np.zeros(ia.size)
@@ -291,7 +343,7 @@ def match_detections(rig: Rig, det: Detections, *, sigma_px: float | None = None
                 if c in (a, b):
                     continue
                 pj = project_batch(*params, np.full(ia.size, c), X, jacobians=False)
-                j, d = pool.nearest(c, fr, pj.xy_px, gate)
+                j, d = pool.nearest(c, fi, pj.xy_px, gate)
                 sets[c] = j
                 cost += np.where(j >= 0, d**2, 0.0)
             nv = (sets >= 0).sum(axis=0)

@@ -150,8 +150,9 @@ def undistortion_table(camera: Camera, *, tol_px: float = 1e-3, step_px: float =
                        min_step_px: float = 1.0) -> UndistortionTable:
     """The undistortion table of `camera`, its grid refined until its error is below `tol_px`.
 
-    The grid spans the image and two cells beyond it; its step starts at `step_px` and halves
-    (not below `min_step_px`) while the error on a 4 x 4 sampling of every cell exceeds `tol_px`.
+    The grid spans the image and two cells beyond it; its step starts at `step_px` and is halved
+    (not below `min_step_px`; as many times as the error's scaling with step^2 predicts) while the
+    error on a 4 x 4 sampling of every cell exceeds `tol_px`.
     Tables depend on the intrinsics only (size, K, distortion) and are cached by them.
     """
     key = (camera.size, camera.K.tobytes(), camera.dist.tobytes(), float(tol_px), float(step_px), float(min_step_px))
@@ -181,7 +182,9 @@ def undistortion_table(camera: Camera, *, tol_px: float = 1e-3, step_px: float =
         worst = float(np.nanmax(err, initial=0.0))
         if worst <= tol_px or step / 2 < min_step_px:
             break
-        step /= 2
+        # the bilinear error scales with step^2: halve as often as that predicts (then check again)
+        halvings = max(1, math.ceil(math.log2(math.sqrt(worst / tol_px)))) if math.isfinite(worst) else 1
+        step = max(step / 2**halvings, min_step_px)
     for a in (table.xn, table.yn):
         a.setflags(write=False)
     table = UndistortionTable(camera, table.x0_px, table.y0_px, step, table.xn, table.yn, worst, coef)
