@@ -169,30 +169,101 @@ def _padded(frame: np.ndarray, p: np.ndarray, n_frames: int):
     return pos, idx, slot
 
 
-def _mutual(D: np.ndarray, gate: float, ratio: float):
-    """Mutual nearest neighbours in D (T, P, Q) within gate and the ratio test both ways:
-    (t, i, j) of accepted links, and the conflicting pairs left for the assignment."""
-    with np.errstate(invalid="ignore"):
-        Dn = np.where(np.isfinite(D), D, np.inf)
-    P, Q = Dn.shape[1:]
-    if P == 0 or Q == 0:
-        return (np.zeros(0, int),) * 3
-    j1 = np.argmin(Dn, axis=2)
-    d1 = np.take_along_axis(Dn, j1[..., None], 2)[..., 0]
-    i1 = np.argmin(Dn, axis=1)
-    e1 = np.take_along_axis(Dn, i1[:, None, :], 1)[:, 0]
-    if Q > 1:
-        d2 = np.partition(Dn, 1, axis=2)[..., 1]
-    else:
-        d2 = np.full(d1.shape, np.inf)
-    if P > 1:
-        e2 = np.partition(Dn, 1, axis=1)[:, 1]
-    else:
-        e2 = np.full(e1.shape, np.inf)
-    t, i = np.nonzero(d1 < gate)
-    j = j1[t, i]
-    ok = (i1[t, j] == i) & (d1[t, i] <= ratio * d2[t, i]) & (e1[t, j] <= ratio * e2[t, j])
-    return t[ok], i[ok], j[ok]
+def _mutual_py(A, B, gate_rows, pregate, gate, ratio, out_t, out_i, out_j, conflict):  # pragma: no cover - compiled
+    """Mutual nearest neighbours between the points A[t] (P, 3) and B[t] (Q, 3) of every t, within
+    `gate`, passing the ratio test both ways (compiled by :func:`_mutual_kernel`). With `pregate`,
+    distances not below gate_rows[t, i] count as absent first. Writes the links (t, i, j), flags
+    the t where a gated pair of two unlinked points remains (``conflict``) and returns the count.
+    Ties go to the first index, the second nearest may equal the nearest (np.argmin,
+    np.partition)."""
+    T1, P = A.shape[0], A.shape[1]
+    Q = B.shape[1]
+    D = np.empty((P, Q))
+    j1 = np.empty(P, np.int64)
+    d1 = np.empty(P)
+    d2 = np.empty(P)
+    i1 = np.empty(Q, np.int64)
+    e1 = np.empty(Q)
+    e2 = np.empty(Q)
+    la = np.empty(P, np.bool_)
+    lb = np.empty(Q, np.bool_)
+    cnt = 0
+    for t in range(T1):
+        for j in range(Q):
+            i1[j] = 0
+            e1[j] = np.inf
+            e2[j] = np.inf
+            lb[j] = False
+        for i in range(P):
+            m1 = np.inf
+            m2 = np.inf
+            arg = 0
+            la[i] = False
+            for j in range(Q):
+                dx = A[t, i, 0] - B[t, j, 0]
+                dy = A[t, i, 1] - B[t, j, 1]
+                dz = A[t, i, 2] - B[t, j, 2]
+                d = math.sqrt(dx * dx + dy * dy + dz * dz)
+                if not np.isfinite(d):
+                    d = np.inf
+                elif pregate and not (d < gate_rows[t, i]):
+                    d = np.inf
+                D[i, j] = d
+                if d < m1:
+                    m2 = m1
+                    m1 = d
+                    arg = j
+                elif d < m2:
+                    m2 = d
+                if d < e1[j]:
+                    e2[j] = e1[j]
+                    e1[j] = d
+                    i1[j] = i
+                elif d < e2[j]:
+                    e2[j] = d
+            j1[i] = arg
+            d1[i] = m1
+            d2[i] = m2
+        for i in range(P):
+            if not (d1[i] < gate):
+                continue
+            j = j1[i]
+            if i1[j] == i and d1[i] <= ratio * d2[i] and e1[j] <= ratio * e2[j]:
+                out_t[cnt] = t
+                out_i[cnt] = i
+                out_j[cnt] = j
+                cnt += 1
+                la[i] = True
+                lb[j] = True
+        for i in range(P):
+            if la[i]:
+                continue
+            for j in range(Q):
+                if not lb[j] and np.isfinite(D[i, j]):
+                    conflict[t] = True
+    return cnt
+
+
+_MUTUAL = None
+
+
+def _mutual_kernel():
+    """The compiled mutual-nearest-neighbour search (numba, imported on first use): a frame's
+    distances, nearest and second nearest in one pass, where numpy held (T, P, P, 3) arrays."""
+    global _MUTUAL
+    if _MUTUAL is None:
+        from numba import njit
+        _MUTUAL = njit(cache=True)(_mutual_py)
+    return _MUTUAL
+
+
+def _mutual(A, B, gate_rows, pregate: bool, gate: float, ratio: float):
+    """(t, i, j) of the accepted links and the conflict flags (T - 1,) of :func:`_mutual_py`."""
+    T1, P = A.shape[:2]
+    out = [np.empty(T1 * P, np.int64) for _ in range(3)]
+    conflict = np.zeros(T1, bool)
+    n = _mutual_kernel()(A, B, gate_rows, pregate, float(gate), float(ratio), *out, conflict)
+    return out[0][:n], out[1][:n], out[2][:n], conflict
 
 
 def link_points(frame, p_world, n_frames: int, *, rate_hz: float, max_speed_m_s: float = 3.0,
@@ -224,37 +295,37 @@ def link_points(frame, p_world, n_frames: int, *, rate_hz: float, max_speed_m_s:
         return np.zeros(0, int)
     pos, idx, slot = _padded(frame, p, n_frames)
     step = max_speed_m_s / rate_hz
+    B = np.ascontiguousarray(pos[1:])
     # pass 1: nearest neighbours without prediction, for velocities
-    D = np.linalg.norm(pos[:-1, :, None] - pos[1:, None], axis=3)
-    t, i, j = _mutual(D, step, ratio)
+    t, i, j, _ = _mutual(np.ascontiguousarray(pos[:-1]), B, np.zeros((1, 1)), False, step, ratio)
     vel = np.zeros_like(pos)
     vel[t + 1, j] = pos[t + 1, j] - pos[t, i]
     has_vel = np.zeros(pos.shape[:2], bool)
     has_vel[t + 1, j] = True
     # pass 2: constant-velocity prediction
     pred = pos + vel
-    D2 = np.linalg.norm(pred[:-1, :, None] - pos[1:, None], axis=3)
-    gate = np.where(has_vel[:-1], gate_m, step)[..., None]
-    D2 = np.where(D2 < gate, D2, np.inf)
-    t, i, j = _mutual(D2, np.inf, ratio)
+    gate = np.where(has_vel[:-1], gate_m, step)
+    t, i, j, conflict = _mutual(np.ascontiguousarray(pred[:-1]), B, gate, True, np.inf, ratio)
     # conflicts: points of frame t and t + 1 left unlinked with gated candidates between them are
     # assigned per frame (linear_sum_assignment), each link still passing the ratio test
     free_a = np.isfinite(pos[:-1, :, 0]).copy()
     free_b = np.isfinite(pos[1:, :, 0]).copy()
     free_a[t, i] = False
     free_b[t, j] = False
-    cand = np.isfinite(D2) & free_a[:, :, None] & free_b[:, None, :]
     extra = []
-    for f in np.flatnonzero(cand.any(axis=(1, 2))):
-        rows = np.flatnonzero(cand[f].any(axis=1))
-        cols = np.flatnonzero(cand[f].any(axis=0))
-        sub = D2[f][np.ix_(rows, cols)]
+    for f in np.flatnonzero(conflict):
+        D2f = np.linalg.norm(pred[f][:, None] - pos[f + 1][None], axis=2)
+        D2f = np.where(D2f < gate[f][:, None], D2f, np.inf)
+        cand = np.isfinite(D2f) & free_a[f][:, None] & free_b[f][None, :]
+        rows = np.flatnonzero(cand.any(axis=1))
+        cols = np.flatnonzero(cand.any(axis=0))
+        sub = D2f[np.ix_(rows, cols)]
         r, c = linear_sum_assignment(np.where(np.isfinite(sub), sub, 1e6))
         for rr, cc in zip(r, c):
             d = sub[rr, cc]
             if not np.isfinite(d):
                 continue
-            others = np.r_[np.delete(D2[f, rows[rr]], cols[cc]), np.delete(D2[f, :, cols[cc]], rows[rr])]
+            others = np.r_[np.delete(D2f[rows[rr]], cols[cc]), np.delete(D2f[:, cols[cc]], rows[rr])]
             if d <= ratio * others.min(initial=np.inf):
                 extra.append((f, rows[rr], cols[cc]))
     if extra:
