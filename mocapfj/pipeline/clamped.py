@@ -10,9 +10,14 @@ import numpy as np
 
 from ..errors import InputError
 from ..io import read_csv_columns, write_json
-from .algebraic import _column
 
 __all__ = ["run_clamped"]
+
+
+def _column(path, cols: dict, name: str) -> np.ndarray:
+    if name not in cols:
+        raise InputError(path, f"column {name!r}", f"one of the CSV's columns ({', '.join(list(cols)[:12])})", "absent")
+    return cols[name]
 
 
 def _names(arg: str, what: str) -> list[str]:
