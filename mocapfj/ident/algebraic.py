@@ -40,14 +40,14 @@ gives 0.1605).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 
 import numpy as np
 from scipy import signal
 from scipy.interpolate import CubicSpline
 
 from ..errors import InputError
-from ..validate import check_array
+from ..validate import check_array, freeze
 
 __all__ = ["MIN_FIT_PCT", "SecondOrderEstimate", "SlidingEstimate", "algebraic_estimate", "algebraic_sliding", "log_decrement",
            "zeta_from_decrement", "second_order_response", "quadrature_kernels", "MIN_WINDOW_SAMPLES"]
@@ -96,6 +96,12 @@ class SecondOrderEstimate:
     fit_pct: float
     n_samples: int
     damping: str = "link"
+
+    def __post_init__(self) -> None:
+        for f in fields(self):
+            v = getattr(self, f.name)
+            if isinstance(v, np.ndarray):
+                object.__setattr__(self, f.name, freeze(v))
 
     @property
     def f0_hz(self) -> float:
@@ -146,6 +152,12 @@ class SlidingEstimate:
     omega0_spread: float
     zeta_spread: float
     n_valid: int
+
+    def __post_init__(self) -> None:
+        for f in fields(self):
+            v = getattr(self, f.name)
+            if isinstance(v, np.ndarray):
+                object.__setattr__(self, f.name, freeze(v))
 
     def to_dict(self) -> dict:
         return {"window_s": self.window_s, "n_windows": int(self.t_end.size), "n_valid": self.n_valid,

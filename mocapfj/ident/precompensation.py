@@ -16,12 +16,12 @@ the resonance.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 
 import numpy as np
 
 from ..errors import InputError
-from ..validate import check_array, check_int, check_scalar
+from ..validate import check_array, check_int, check_scalar, freeze
 from .algebraic import second_order_response
 
 __all__ = ["Precompensation", "precompensate", "jerk_limited_profile", "deflection_amplitude"]
@@ -52,6 +52,12 @@ class Precompensation:
     zeta: float
     iterations: int
     damping: str = "link"
+
+    def __post_init__(self) -> None:
+        for f in fields(self):
+            v = getattr(self, f.name)
+            if isinstance(v, np.ndarray):
+                object.__setattr__(self, f.name, freeze(v))
 
     def to_dict(self) -> dict:
         b = deflection_amplitude(self.predicted_error_before)
