@@ -170,3 +170,29 @@ def test_precompensation_needs_the_right_damping_form(staubli_move):
     pc = precompensate(t, ref, e.omega0, e.zeta, damping=e.damping)
     after = deflection_amplitude(simulate(plant, t, PrescribedMotor.from_samples(t, pc.command)).q[:, 0] - ref)["peak"]
     assert before / after > 2.0
+
+
+def test_scatter_near_the_cramer_rao_bound():
+    """100 ms of the Staubli's free vibration at 10 x the tracker's noise: the scatter of omega0 and
+    zeta over noise draws is within 1.5 x the Cramer-Rao bound of the damped cosine (five
+    parameters: omega0, zeta, two amplitudes, the rest value)."""
+    t = np.arange(0, 0.1 + 1e-12, TS)
+    sd = 1e-6
+    wd = W2 * math.sqrt(1 - ZETA2 ** 2)
+
+    def f(p):
+        w, z, a, b, c = p
+        return c + np.exp(-z * w * t) * (a * np.cos(w * math.sqrt(1 - z ** 2) * t) + b * np.sin(w * math.sqrt(1 - z ** 2) * t))
+
+    p0 = np.array([W2, ZETA2, 1.5e-4 * math.cos(0.3), -1.5e-4 * math.sin(0.3), 1e-4])
+    steps = np.abs(p0) * 1e-6
+    J = np.column_stack([(f(p0 + np.eye(5)[i] * steps[i]) - f(p0 - np.eye(5)[i] * steps[i])) / (2 * steps[i])
+                         for i in range(5)])
+    bound = sd * np.sqrt(np.diag(np.linalg.inv(J.T @ J))[:2])
+    clean = free_vibration(t)
+    assert np.allclose(clean, f(p0), atol=1e-12) and wd > 0
+    rng = np.random.default_rng(99)
+    est = np.array([[e.omega0, e.zeta] for e in (algebraic_estimate(t, clean + sd * rng.standard_normal(t.size))
+                                                  for _ in range(60))])
+    ratio = est.std(axis=0, ddof=1) / bound
+    assert (ratio > 0.7).all() and (ratio < 1.5).all(), ratio
