@@ -40,7 +40,7 @@ import numpy as np
 
 from ..errors import InputError
 from ..types import Camera, Rig
-from .projection import camera_parameters, distort, normalized_from_pixels, project_batch, rotation_jacobian
+from .projection import camera_parameters, normalized_from_pixels, project_batch, rotation_jacobian
 
 __all__ = ["UndistortionTable", "undistortion_table", "triangulate_linear", "triangulate", "Triangulation",
            "observation_array", "rig_sigma_px", "dlt_feature_matrix", "solve_dlt", "rig_parameters"]
@@ -516,43 +516,128 @@ def rig_parameters(rig: Rig):
     return tuple(np.stack([p[k] for p in ps]) for k in range(4))
 
 
-def _point_views(params, ci: np.ndarray, p: np.ndarray):
-    """Pixels (n, 2), their derivatives by the point (n, 2, 3) and depths (n,) of points p (n, 3)
-    seen by cameras ci (n,), sorted by camera.
-
-    The camera model of :func:`mocapfj.vision.projection.project_batch` (its distortion and the
-    distortion's Jacobian by :func:`~mocapfj.vision.projection.distort`), with only the point's
-    derivative d uv / d p = diag(f) J_dist [[1, 0, -x], [0, 1, -y]] / Z R, in scalar arithmetic
-    per camera (no small matrix products: they scale badly on busy cores)."""
-    rv, tv, intr, extra = params
-    R = rotation_jacobian(rv)[0]
-    n = ci.size
-    uv = np.empty((n, 2))
-    J = np.empty((n, 2, 3))
-    z = np.empty(n)
-    bounds = np.searchsorted(ci, np.arange(R.shape[0] + 1))
-    for c in range(R.shape[0]):
-        sl = slice(int(bounds[c]), int(bounds[c + 1]))
-        if sl.start == sl.stop:
+def _gn_step_py(R, tv, intr, d14, xy, use, w, p, Hn, res, zz):  # pragma: no cover - compiled
+    """One Gauss-Newton step of every point (compiled by :func:`_gn_kernel`): for each used view the
+    projection and its point Jacobian (the camera model of :func:`~mocapfj.vision.projection.project_batch`
+    without sensor tilt: :func:`~mocapfj.vision.projection.distort`'s distortion and distortion
+    Jacobian J_dist, and d uv / d p = diag(f) J_dist [[1, 0, -x], [0, 1, -y]] / Z R, in scalar
+    arithmetic), H = sum w J^T J and g = sum w J^T r
+    over the views in camera order (as the bincount did), the step -H^-1 g (0 where det H <= 0),
+    and the residuals predicted linearly at the new point. Writes p, Hn (N, 9), res (C, N, 2) and
+    zz (C, N) of the used views; returns the largest |step|."""
+    C, N = use.shape
+    Jl = np.empty((C, 2, 3))
+    rl = np.empty((C, 2))
+    gl = np.empty(C, np.bool_)
+    smax = 0.0
+    for n in range(N):
+        for k in range(9):
+            Hn[n, k] = 0.0
+        if not np.isfinite(p[n, 0]):
             continue
-        q = p[sl]
-        Rc, t = R[c], tv[c]
-        X, Y, Z = (Rc[k, 0] * q[:, 0] + Rc[k, 1] * q[:, 1] + Rc[k, 2] * q[:, 2] + t[k] for k in range(3))
-        zs = np.where(Z > 0.0, Z, np.nan)
-        x = X / zs
-        y = Y / zs
-        xyd, Jd = distort(np.stack([x, y], axis=1), np.concatenate([intr[c, 4:9], extra[c]]))
-        fx, fy, cx, cy = intr[c, :4]
-        uv[sl, 0] = fx * xyd[:, 0] + cx
-        uv[sl, 1] = fy * xyd[:, 1] + cy
-        for row, f in ((0, fx), (1, fy)):
-            a0 = f * Jd[:, row, 0] / zs
-            a1 = f * Jd[:, row, 1] / zs
-            a2 = -(a0 * x + a1 * y)
-            for k in range(3):
-                J[sl, row, k] = a0 * Rc[0, k] + a1 * Rc[1, k] + a2 * Rc[2, k]
-        z[sl] = Z
-    return uv, J, z
+        q0, q1, q2 = p[n, 0], p[n, 1], p[n, 2]
+        h = Hn[n]
+        for c in range(C):
+            if not use[c, n]:
+                continue
+            X = R[c, 0, 0] * q0 + R[c, 0, 1] * q1 + R[c, 0, 2] * q2 + tv[c, 0]
+            Y = R[c, 1, 0] * q0 + R[c, 1, 1] * q1 + R[c, 1, 2] * q2 + tv[c, 1]
+            Z = R[c, 2, 0] * q0 + R[c, 2, 1] * q1 + R[c, 2, 2] * q2 + tv[c, 2]
+            zz[c, n] = Z
+            zs = Z if Z > 0.0 else np.nan
+            x = X / zs
+            y = Y / zs
+            k1, k2, p1, p2, k3 = d14[c, 0], d14[c, 1], d14[c, 2], d14[c, 3], d14[c, 4]
+            k4, k5, k6, s1, s2, s3, s4 = d14[c, 5], d14[c, 6], d14[c, 7], d14[c, 8], d14[c, 9], d14[c, 10], d14[c, 11]
+            r2 = x * x + y * y
+            a = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))
+            b = 1.0 + r2 * (k4 + r2 * (k5 + r2 * k6))
+            da = k1 + r2 * (2.0 * k2 + 3.0 * k3 * r2)
+            db = k4 + r2 * (2.0 * k5 + 3.0 * k6 * r2)
+            radial = a / b
+            drad = (da * b - a * db) / (b * b)
+            xyp = x * y
+            xd = x * radial + 2.0 * p1 * xyp + p2 * (r2 + 2.0 * x * x) + r2 * (s1 + s2 * r2)
+            yd = y * radial + p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * xyp + r2 * (s3 + s4 * r2)
+            tx = s1 + 2.0 * s2 * r2
+            ty = s3 + 2.0 * s4 * r2
+            j00 = radial + 2.0 * x * x * drad + 2.0 * p1 * y + 6.0 * p2 * x + 2.0 * x * tx
+            j01 = 2.0 * x * y * drad + 2.0 * p1 * x + 2.0 * p2 * y + 2.0 * y * tx
+            j10 = 2.0 * x * y * drad + 2.0 * p1 * x + 2.0 * p2 * y + 2.0 * x * ty
+            j11 = radial + 2.0 * y * y * drad + 6.0 * p1 * y + 2.0 * p2 * x + 2.0 * y * ty
+            fx, fy = intr[c, 0], intr[c, 1]
+            r0 = (fx * xd + intr[c, 2]) - xy[c, n, 0]
+            r1 = (fy * yd + intr[c, 3]) - xy[c, n, 1]
+            for row in range(2):
+                f = fx if row == 0 else fy
+                a0 = f * (j00 if row == 0 else j10) / zs
+                a1 = f * (j01 if row == 0 else j11) / zs
+                a2 = -(a0 * x + a1 * y)
+                for k in range(3):
+                    Jl[c, row, k] = a0 * R[c, 0, k] + a1 * R[c, 1, k] + a2 * R[c, 2, k]
+            good = np.isfinite(r0) and np.isfinite(r1)
+            gl[c] = good
+            if not good:
+                for row in range(2):
+                    for k in range(3):
+                        Jl[c, row, k] = 0.0
+                r0 = 0.0
+                r1 = 0.0
+            rl[c, 0] = r0
+            rl[c, 1] = r1
+            ww = w[c, n] if good else 0.0
+            J0, J1 = Jl[c, 0], Jl[c, 1]
+            h[0] += ww * (J0[0] * J0[0] + J1[0] * J1[0])
+            h[1] += ww * (J0[0] * J0[1] + J1[0] * J1[1])
+            h[2] += ww * (J0[0] * J0[2] + J1[0] * J1[2])
+            h[3] += ww * (J0[1] * J0[1] + J1[1] * J1[1])
+            h[4] += ww * (J0[1] * J0[2] + J1[1] * J1[2])
+            h[5] += ww * (J0[2] * J0[2] + J1[2] * J1[2])
+            h[6] += ww * (J0[0] * r0 + J1[0] * r1)
+            h[7] += ww * (J0[1] * r0 + J1[1] * r1)
+            h[8] += ww * (J0[2] * r0 + J1[2] * r1)
+        a_, b_, c_, e_, f_, hh, g0, g1, g2 = h[0], h[1], h[2], h[3], h[4], h[5], h[6], h[7], h[8]
+        A11 = e_ * hh - f_ * f_
+        A12 = c_ * f_ - b_ * hh
+        A13 = b_ * f_ - c_ * e_
+        A22 = a_ * hh - c_ * c_
+        A23 = b_ * c_ - a_ * f_
+        A33 = a_ * e_ - b_ * b_
+        det = a_ * A11 + b_ * A12 + c_ * A13
+        s0 = s1_ = s2_ = 0.0
+        if det > 0.0:
+            iv = -1.0 / det
+            s0 = (A11 * g0 + A12 * g1 + A13 * g2) * iv
+            s1_ = (A12 * g0 + A22 * g1 + A23 * g2) * iv
+            s2_ = (A13 * g0 + A23 * g1 + A33 * g2) * iv
+        p[n, 0] += s0
+        p[n, 1] += s1_
+        p[n, 2] += s2_
+        m = max(abs(s0), abs(s1_), abs(s2_))
+        if m > smax:
+            smax = m
+        for c in range(C):
+            if not use[c, n]:
+                continue
+            if gl[c]:
+                res[c, n, 0] = rl[c, 0] + (Jl[c, 0, 0] * s0 + Jl[c, 0, 1] * s1_ + Jl[c, 0, 2] * s2_)
+                res[c, n, 1] = rl[c, 1] + (Jl[c, 1, 0] * s0 + Jl[c, 1, 1] * s1_ + Jl[c, 1, 2] * s2_)
+            else:
+                res[c, n, 0] = res[c, n, 1] = np.nan
+    return smax
+
+
+_GN = None
+
+
+def _gn_kernel():
+    """The compiled Gauss-Newton step (numba, imported on first use): the projection, Jacobian
+    and normal equations of a point's views in one pass."""
+    global _GN
+    if _GN is None:
+        from numba import njit
+        _GN = njit(cache=True)(_gn_step_py)
+    return _GN
 
 
 def _gauss_newton(params, xy, use, w, p, iterations: int):
@@ -560,46 +645,31 @@ def _gauss_newton(params, xy, use, w, p, iterations: int):
 
     Each step takes a fresh Jacobian; after the last step the residuals are the linear prediction
     r + J step (exact to second order in a step that is already below the noise) and H the last
-    Jacobian's, so that `iterations` steps cost `iterations` projections.
+    Jacobian's, so that `iterations` steps cost `iterations` projections. The steps run compiled
+    (:func:`_gn_step_py`).
 
     Returns p, H (N, 3, 3) = sum w J^T J, residuals r (C, N, 2) px (NaN where not used or behind the
     camera), depth z (C, N)."""
     C, N = use.shape
-    p = p.copy()
-    ci, pi = np.nonzero(use & np.isfinite(p[:, 0])[None])
+    rv, tv, intr, extra = params
+    R = np.ascontiguousarray(rotation_jacobian(rv)[0])
+    d14 = np.ascontiguousarray(np.concatenate([intr[:, 4:9], extra], axis=1))
+    p = np.array(p, dtype=np.float64, order="C")
+    use = np.ascontiguousarray(use)
+    w = np.ascontiguousarray(np.broadcast_to(w, (C, N)), dtype=np.float64)
+    xy = np.ascontiguousarray(xy, dtype=np.float64)
     Hn = np.zeros((N, 9))
-    r = np.zeros((ci.size, 2))
-    J = np.zeros((ci.size, 2, 3))
-    z = np.zeros(ci.size)
+    res = np.full((C, N, 2), np.nan)
+    zz = np.full((C, N), np.nan)
+    step = _gn_kernel()
     for it in range(max(int(iterations), 1)):
-        uv, J, z = _point_views(params, ci, p[pi])
-        r = uv - xy[ci, pi]
-        good = np.isfinite(r).all(axis=1)
-        ww = np.where(good, w[ci, pi], 0.0)
-        r[~good] = 0.0
-        J[~good] = 0.0
-        # H = sum J^T w J (6 entries), g = sum J^T w r (3): by bincount over the points
-        for k in range(6):
-            i, j = _IU[0][k], _IU[1][k]
-            Hn[:, k] = np.bincount(pi, ww * (J[:, 0, i] * J[:, 0, j] + J[:, 1, i] * J[:, 1, j]), minlength=N)
-        for i in range(3):
-            Hn[:, 6 + i] = np.bincount(pi, ww * (J[:, 0, i] * r[:, 0] + J[:, 1, i] * r[:, 1]), minlength=N)
-        step, det = solve_dlt(Hn)
-        step[~(det > 0)] = 0.0
-        p += step
-        r += np.einsum("nij,nj->ni", J, step[pi])
-        r[~good] = np.nan
-        if not np.nanmax(np.abs(step), initial=0.0) > 1e-10:
+        if not step(R, np.ascontiguousarray(tv), np.ascontiguousarray(intr), d14, xy, use, w, p, Hn, res, zz) > 1e-10:
             break
     H = np.empty((N, 3, 3))
     for k in range(6):
         i, j = _IU[0][k], _IU[1][k]
         H[:, i, j] = Hn[:, k]
         H[:, j, i] = Hn[:, k]
-    res = np.full((C, N, 2), np.nan)
-    res[ci, pi] = r
-    zz = np.full((C, N), np.nan)
-    zz[ci, pi] = z
     return p, H, res, zz
 
 
