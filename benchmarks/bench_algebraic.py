@@ -39,7 +39,8 @@ from scipy.optimize import curve_fit
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from mocapfj.errors import InputError  # noqa: E402
-from mocapfj.ident.algebraic import algebraic_estimate, log_decrement  # noqa: E402
+from mocapfj.ident.algebraic import algebraic_estimate  # noqa: E402
+from mocapfj.ident.decrement import log_decrement  # noqa: E402
 
 
 def oscillation(rng, f0, zeta, fs_per_period, periods, rel_noise):

@@ -14,8 +14,8 @@ spring models, friction, excitation design, n-link and rigid robots.
 - :mod:`.excitation`: Fourier motor references minimising the regressor's condition number.
 - :mod:`.regressor`, :mod:`.nlink`, :mod:`.rigid`: n-link robots through Pinocchio (imported on
   first use: Pinocchio takes seconds to load).
-- :mod:`.algebraic`, :mod:`.precompensation`: omega0 and zeta from a fraction of a period, the
-  logarithmic decrement, model-based pre-compensation (Oueslati et al. 2012); :mod:`.clamped`:
+- :mod:`.algebraic`, :mod:`.decrement`, :mod:`.precompensation`: omega0 and zeta from a fraction of
+  a period, the logarithmic decrement, model-based pre-compensation (Oueslati et al. 2012); :mod:`.clamped`:
   stiffness with the end-effector clamped (Jubien, Abba and Gautier 2014). Imported on first use.
 
 See docs/architecture.md for what this package owns and may import.
@@ -43,7 +43,7 @@ _LAZY = {"base_from_standard": "regressor", "base_parameters": "regressor", "loa
          "nlink_regressor": "regressor", "standard_parameters": "regressor",
          "NLinkResult": "nlink", "identify_nlink_motor_first": "nlink", "identify_nlink_joints": "nlink",
          "identify_rigid": "rigid", "identify_rigid_log": "rigid", "RIGID_FRICTION_MODELS": "rigid",
-         "algebraic_estimate": "algebraic", "algebraic_sliding": "algebraic", "log_decrement": "algebraic",
+         "algebraic_estimate": "algebraic", "algebraic_sliding": "algebraic", "log_decrement": "decrement",
          "SecondOrderEstimate": "algebraic", "precompensate": "precompensation", "identify_clamped": "clamped",
          "fit_clamped": "clamped", "mdh_model": "clamped", "ClampedStiffness": "clamped"}
 

@@ -47,7 +47,8 @@ def run_algebraic(csv, out: str | Path, output: str, input: str | None = None, t
     Writes OUT/algebraic.json (the summary) and, with `window`, OUT/sliding.csv (t_end, omega0,
     omega0_std, zeta, zeta_std per window).
     """
-    from ..ident.algebraic import algebraic_estimate, algebraic_sliding, log_decrement
+    from ..ident.algebraic import algebraic_estimate, algebraic_sliding
+    from ..ident.decrement import log_decrement
 
     out = Path(out)
     cols = read_csv_columns(csv)

@@ -1,4 +1,4 @@
-"""Algebraic estimator, logarithmic decrement and pre-compensation (Oueslati, Bearee, Gibaru and
+"""Algebraic estimator and pre-compensation (Oueslati, Bearee, Gibaru and
 Moraru 2012) against analytic damped oscillations and the project's flexible-joint simulator.
 The grid over seeds, noise levels and durations is benchmarks/bench_algebraic.py."""
 
@@ -11,8 +11,7 @@ import pytest
 
 from mocapfj.dynamics import CoulombViscous, LinearSpring, PrescribedMotor, SingleJoint, simulate
 from mocapfj.errors import InputError
-from mocapfj.ident.algebraic import (algebraic_estimate, algebraic_sliding, log_decrement, second_order_response,
-                                     zeta_from_decrement)
+from mocapfj.ident.algebraic import algebraic_estimate, algebraic_sliding, second_order_response
 from mocapfj.ident.precompensation import deflection_amplitude, jerk_limited_profile, precompensate
 
 # Oueslati et al. (2012): Staubli RX-170B axis 2, eq. 8 and section 3.C
@@ -83,22 +82,6 @@ def test_sliding_windows_match_the_single_window():
     assert abs(s.omega0_median / W2 - 1) < 0.01 and abs(s.zeta_median / ZETA2 - 1) < 0.03
 
 
-def test_log_decrement_and_the_papers_eq8():
-    # their D1 = 99.5544 %, D2 = 35.8370 % one period apart, zeta = 0.1626 = delta / (2 pi)
-    delta = math.log(99.5544 / 35.8370)
-    assert zeta_from_decrement(delta, exact=False) == pytest.approx(0.1626, abs=1e-4)
-    assert zeta_from_decrement(delta) == pytest.approx(0.1605, abs=1e-4)
-    assert J2 * 60.968 ** 2 == pytest.approx(K2, rel=1e-4)
-    rng = np.random.default_rng(8)
-    t = np.arange(0, 0.3, TS)
-    z = []
-    for _ in range(10):
-        e = log_decrement(t, free_vibration(t, phase=rng.uniform(0, 6.3)) + 1e-6 * rng.standard_normal(t.size))
-        assert abs(e.omega0 / W2 - 1) < 0.03 and abs(e.zeta / ZETA2 - 1) < 0.06
-        z += [(e.omega0 - W2) / e.omega0_std, (e.zeta - ZETA2) / e.zeta_std]
-    assert np.sqrt(np.mean(np.square(z))) < 2.0
-
-
 def test_bad_input_is_named():
     t = np.arange(0, 0.1, TS)
     with pytest.raises(InputError, match="at least 8 samples"):
@@ -109,8 +92,6 @@ def test_bad_input_is_named():
         algebraic_estimate(t2, free_vibration(t2))
     with pytest.raises(InputError, match="oscillation"):
         algebraic_estimate(t, np.zeros(t.size))
-    with pytest.raises(InputError, match="extrema"):
-        log_decrement(t[:12], 1e-3 * t[:12])
     with pytest.raises(InputError, match="window"):
         algebraic_sliding(t, free_vibration(t), window_s=1.0)
 
