@@ -37,7 +37,7 @@ import numpy as np
 
 from ..errors import InputError
 from ..types import Detections, Rig
-from .projection import project_batch
+from .projection import rotation_jacobian
 from .triangulate import (Triangulation, dlt_feature_matrix, rig_parameters, solve_dlt, rig_sigma_px, triangulate,
                           undistortion_table)
 
@@ -128,61 +128,86 @@ def _edges_py(fs_a, fs_b, free_a, free_b, nrm_a, nrm_b, E, f_a, f_b, eps, out_i,
     return cnt
 
 
-def _nearest_py(fs, free, xy, qf, qxy, gate, out, dist):  # pragma: no cover - compiled
-    """For each query (dense frame qf, pixel qxy), the free detection of one camera within `gate`
-    px when it is the only one there (detections sorted by frame, then x): index or -1, distance."""
-    for n in range(qf.shape[0]):
-        out[n] = -1
-        dist[n] = np.inf
-        x, y = qxy[n, 0], qxy[n, 1]
-        if not (np.isfinite(x) and np.isfinite(y)):
-            continue
-        f = qf[n]
-        count = 0
-        best = -1
-        bd = np.inf
-        for j in range(fs[f], fs[f + 1]):
-            dx = xy[j, 0] - x
-            if dx < -gate:
+def _support_py(R, tv, intr, d14, a, b, X, fi, fstart, free, xy, off, gate, sets, cost):  # pragma: no cover - compiled
+    """The support of candidates X (n, 3) of frames fi (dense) from camera pair (a, b) (compiled by
+    :func:`_kernels`): each is projected into every other camera c (the model of
+    :func:`~mocapfj.vision.projection.project_batch`, NaN behind the camera) and takes the free
+    detection of that frame within `gate` px when it is the only one there (two blobs within the
+    gate, markers that nearly overlap in this camera, support nothing: either could be the
+    marker's). Detections of all cameras are concatenated (camera c from off[c]), sorted by frame
+    then x; fstart (C, F + 1) the first detection of each frame. Writes sets[c, k] (index within
+    camera c, or -1) and cost[k] (the sum of the squared distances, in camera order)."""
+    C = R.shape[0]
+    for k in range(X.shape[0]):
+        cost[k] = 0.0
+        q0, q1, q2 = X[k, 0], X[k, 1], X[k, 2]
+        f = fi[k]
+        for c in range(C):
+            if c == a or c == b:
                 continue
-            if dx > gate:
-                break
-            if not free[j]:
+            sets[c, k] = -1
+            Z = R[c, 2, 0] * q0 + R[c, 2, 1] * q1 + R[c, 2, 2] * q2 + tv[c, 2]
+            if not Z > 0.0:
                 continue
-            dy = xy[j, 1] - y
-            d = math.sqrt(dx * dx + dy * dy)
-            if d < gate:
-                count += 1
-                if d < bd:
-                    bd = d
-                    best = j
-        if count == 1:
-            out[n] = best
-            dist[n] = bd
+            x = (R[c, 0, 0] * q0 + R[c, 0, 1] * q1 + R[c, 0, 2] * q2 + tv[c, 0]) / Z
+            y = (R[c, 1, 0] * q0 + R[c, 1, 1] * q1 + R[c, 1, 2] * q2 + tv[c, 1]) / Z
+            k1, k2, p1, p2, k3 = d14[c, 0], d14[c, 1], d14[c, 2], d14[c, 3], d14[c, 4]
+            k4, k5, k6, s1, s2, s3, s4 = d14[c, 5], d14[c, 6], d14[c, 7], d14[c, 8], d14[c, 9], d14[c, 10], d14[c, 11]
+            r2 = x * x + y * y
+            radial = (1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))) / (1.0 + r2 * (k4 + r2 * (k5 + r2 * k6)))
+            xyp = x * y
+            xd = x * radial + 2.0 * p1 * xyp + p2 * (r2 + 2.0 * x * x) + r2 * (s1 + s2 * r2)
+            yd = y * radial + p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * xyp + r2 * (s3 + s4 * r2)
+            u = xd * intr[c, 0] + intr[c, 2]
+            v = yd * intr[c, 1] + intr[c, 3]
+            if not (np.isfinite(u) and np.isfinite(v)):
+                continue
+            count = 0
+            best = -1
+            bd = np.inf
+            for j in range(fstart[c, f], fstart[c, f + 1]):
+                dx = xy[j, 0] - u
+                if dx < -gate:
+                    continue
+                if dx > gate:
+                    break
+                if not free[j]:
+                    continue
+                dy = xy[j, 1] - v
+                d = math.sqrt(dx * dx + dy * dy)
+                if d < gate:
+                    count += 1
+                    if d < bd:
+                        bd = d
+                        best = j
+            if count == 1:
+                sets[c, k] = best - off[c]
+                cost[k] += bd * bd
 
 
-_EDGES = _NEAREST = None
+_EDGES = _SUPPORT = None
 
 
 def _kernels():
     """The compiled epipolar pairing and support search (numba, imported on first use): a frame
     holds a dozen blobs per camera, and numpy's all-pairs arrays of every frame at once cost more
     than the pairs themselves."""
-    global _EDGES, _NEAREST
+    global _EDGES, _SUPPORT
     if _EDGES is None:
         from numba import njit
         _EDGES = njit(cache=True)(_edges_py)
-        _NEAREST = njit(cache=True)(_nearest_py)
-    return _EDGES, _NEAREST
+        _SUPPORT = njit(cache=True)(_support_py)
+    return _EDGES, _SUPPORT
 
 
 class _Pool:
     """The detections, per camera sorted by (frame, x), with an 'unassigned' mask; frames are
-    numbered densely (``fidx``) and ``fstart[c][f]`` is camera c's first detection of frame f."""
+    numbered densely (``fidx``) and ``fstart[c, f]`` is the first detection of camera c in frame f
+    in the concatenation of all cameras' detections (camera c from ``off[c]``: ``xy_all``,
+    ``free_all``, of which ``xy[c]``, ``free[c]`` are views)."""
 
     def __init__(self, rig: Rig, det: Detections, ok: np.ndarray):
         self.C = len(rig.cameras)
-        self.rows, self.frame, self.xy, self.nrm, self.free, self.fidx, self.fstart = [], [], [], [], [], [], []
         frames, dense = np.unique(det.frame, return_inverse=True)
         dense = dense.ravel()
         self.n_frames = int(frames.size)
@@ -191,29 +216,25 @@ class _Pool:
         order = by_x[np.argsort((det.camera.astype(np.int64) * self.n_frames + dense)[by_x], kind="stable")]
         order = order[ok[order]]
         cams = det.camera[order]
-        bounds = np.searchsorted(cams, np.arange(self.C + 1))
+        self.off = np.searchsorted(cams, np.arange(self.C + 1)).astype(np.int64)
+        self.xy_all = np.ascontiguousarray(det.xy_px[order], dtype=np.float64)
+        self.free_all = np.zeros(order.size, bool)
+        fid = dense[order]
+        self.fstart = np.empty((self.C, self.n_frames + 1), np.int64)
+        self.rows, self.frame, self.xy, self.nrm, self.free, self.fidx = [], [], [], [], [], []
         for c in range(self.C):
-            rows = order[bounds[c]:bounds[c + 1]]
-            self.rows.append(rows)
-            self.frame.append(det.frame[rows])
-            self.fidx.append(dense[rows])
-            self.fstart.append(np.searchsorted(self.fidx[c], np.arange(self.n_frames + 1)))
-            self.xy.append(np.ascontiguousarray(det.xy_px[rows]))
+            sl = slice(int(self.off[c]), int(self.off[c + 1]))
+            self.rows.append(order[sl])
+            self.frame.append(det.frame[order[sl]])
+            self.fidx.append(fid[sl])
+            self.fstart[c] = self.off[c] + np.searchsorted(fid[sl], np.arange(self.n_frames + 1))
+            self.xy.append(self.xy_all[sl])
             self.nrm.append(undistortion_table(rig.cameras[c]).normalized(self.xy[c]))
-            self.free.append(np.isfinite(self.nrm[c][:, 0]))
+            self.free_all[sl] = np.isfinite(self.nrm[c][:, 0])
+            self.free.append(self.free_all[sl])
 
     def free_index(self, c: int) -> np.ndarray:
         return np.flatnonzero(self.free[c])
-
-    def nearest(self, c: int, fidx: np.ndarray, xy: np.ndarray, gate: float) -> tuple[np.ndarray, np.ndarray]:
-        """The free detection of camera c in dense frame `fidx` within `gate` px of `xy`, when it is
-        the only one there: (index or -1, distance). Two blobs within the gate (markers that nearly
-        overlap in this camera) support nothing: either could be the marker's."""
-        out = np.empty(fidx.size, np.int64)
-        dist = np.empty(fidx.size)
-        _kernels()[1](self.fstart[c], self.free[c], self.xy[c], fidx, np.ascontiguousarray(xy, dtype=np.float64),
-                      float(gate), out, dist)
-        return out, dist
 
 
 def _epipolar_edges(rig, pool: _Pool, a: int, b: int, eps_px: float):
@@ -221,7 +242,9 @@ def _epipolar_edges(rig, pool: _Pool, a: int, b: int, eps_px: float):
     other's epipolar lines (both images)."""
     edges = _kernels()[0]
     E = _essential(rig, a, b)
-    args = (pool.fstart[a], pool.fstart[b], pool.free[a], pool.free[b], pool.nrm[a], pool.nrm[b], E,
+    fs_a = pool.fstart[a] - pool.off[a]
+    fs_b = pool.fstart[b] - pool.off[b]
+    args = (fs_a, fs_b, pool.free[a], pool.free[b], pool.nrm[a], pool.nrm[b], E,
             float(rig.cameras[a].K[0, 0]), float(rig.cameras[b].K[0, 0]), float(eps_px))
     guess = 2 * int(min(pool.free[a].sum(), pool.free[b].sum())) + 16
     ia, ib = np.empty(guess, np.int64), np.empty(guess, np.int64)
@@ -326,6 +349,11 @@ def match_detections(rig: Rig, det: Detections, *, sigma_px: float | None = None
     stats = {"n_detections": int(det.frame.size), "n_nonfinite": int((~finite).sum()), "ghost_pairs": 0,
              "conflicts_lost": 0}
     pairs = _pair_order(rig)
+    support = _kernels()[1]
+    rv, tv, intr, extra = params
+    R = np.ascontiguousarray(rotation_jacobian(rv)[0])
+    d14 = np.ascontiguousarray(np.concatenate([intr[:, 4:9], extra], axis=1))
+    tv, intr = np.ascontiguousarray(tv), np.ascontiguousarray(intr)
     for min_views in (4, 3):
         n_sweep = 0
         for a, b in pairs:
@@ -339,13 +367,8 @@ def match_detections(rig: Rig, det: Detections, *, sigma_px: float | None = None
             sets = np.full((C, ia.size), -1)
             sets[a], sets[b] = ia, ib
             cost = np.zeros(ia.size)
-            for c in range(C):
-                if c in (a, b):
-                    continue
-                pj = project_batch(*params, np.full(ia.size, c), X, jacobians=False)
-                j, d = pool.nearest(c, fi, pj.xy_px, gate)
-                sets[c] = j
-                cost += np.where(j >= 0, d**2, 0.0)
+            support(R, tv, intr, d14, a, b, np.ascontiguousarray(X), fi, pool.fstart, pool.free_all, pool.xy_all,
+                    pool.off, float(gate), sets, cost)
             nv = (sets >= 0).sum(axis=0)
             strong = nv >= min_views
             stats["ghost_pairs"] += int((nv == 2).sum()) if min_views == 3 else 0
