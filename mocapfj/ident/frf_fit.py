@@ -21,11 +21,12 @@ sum_k |G_hat_k - G(j w_k, theta)|^2 / var_k with var_k the FRF's noise variance,
 d, b, v >= 0. The variances are the FRF's own, from the period-to-period spread, line by line (not
 smoothed over frequency: a smoothed variance flattens the peak at the resonance, exactly where the
 modes are decided, and the SDs of f_r came out 2.7x too small on the grid of benchmarks/bench_frf.py).
-Their M (P - 1) complex degrees of freedom per line inflate the chi-square by about
-nu / (nu - 1); with 3 periods or more the SDs cover the errors (z RMS 0.8-1.3 in the benchmark).
-Covariance: (A^T A)^{-1} at the optimum (A the Jacobian of the weighted residuals),
-times the reduced chi-square when that exceeds 1 (model error or nonlinear distortion beyond the
-noise). Modes: the anti-resonance from the numerator's complex roots, the resonance from D's,
+Their nu = M (P - 1) complex degrees of freedom per line inflate the chi-square by about
+nu / (nu - 1), and few of them make the weights noisy. Covariance: (A^T A)^{-1} at the optimum (A
+the Jacobian of the weighted residuals), times the reduced chi-square when that exceeds 1 (model
+error or nonlinear distortion beyond the noise), times 1 + 3 / nu^2: an empirical allowance for
+the noisy weights, measured in benchmarks/bench_frf.py §3 (without it the z RMS of k is 1.97 at
+nu = 1 and 1.78 at nu = 2; at nu >= 6 it is 0.7-1.2 and the factor below 1.09). Modes: the anti-resonance from the numerator's complex roots, the resonance from D's,
 f = |p| / 2 pi and zeta = -Re p / |p|; their SDs by the delta method.
 """
 
@@ -200,7 +201,7 @@ def fit_two_inertia(frf: FRF, *, output: str = "motor", fixed: dict | None = Non
         raise InputError(None, "frf", f"more than {len(free) / 2:.0f} excited lines to fit {len(free)} parameters",
                          int(sel.sum()))
     f, G = frf.f_hz[sel], frf.G[sel]
-    sd = np.sqrt(np.maximum(frf.var[sel], (1e-10 * np.abs(frf.G[sel])) ** 2 + 1e-300) / 2.0)   # noise-free data: 1e-10 relative
+    sd = np.sqrt(np.maximum(frf.var[sel], (1e-10 * np.abs(frf.G[sel])) ** 2 + 1e-300) / 2.0)   # noise-free: 1e-10
     sub = FRF(f, G, frf.var[sel], None, frf.coherence[sel], frf.lines[sel], frf.estimator, frf.n_periods,
               frf.n_realisations, frf.fs_hz, frf.n_samples, frf.closed_loop, frf.distortion)
     starts = _initial(sub, output)
@@ -240,7 +241,8 @@ def fit_two_inertia(frf: FRF, *, output: str = "motor", fixed: dict | None = Non
     dof = 2 * f.size - len(free)
     chi2 = float(2 * best.cost)
     try:
-        cov_x = np.linalg.inv(A.T @ A) * max(1.0, chi2 / max(dof, 1))
+        nu = frf.n_realisations * max(frf.n_periods - 1, 1)
+        cov_x = np.linalg.inv(A.T @ A) * max(1.0, chi2 / max(dof, 1)) * (1.0 + 3.0 / nu ** 2)
     except np.linalg.LinAlgError:
         cov_x = np.full((len(free), len(free)), np.nan)
     th = full(best.x)

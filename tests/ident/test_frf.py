@@ -51,19 +51,26 @@ def test_open_loop_noise_level_covers_the_error():
 
 
 def test_closed_loop_h1_biased_indirect_not():
-    """Process noise (a torque disturbance on the motor) fed back by the PD loop: H1 is biased
-    (towards -1/C) and its error far beyond its own SD; the indirect and harmonic-mean estimators are
-    not (Makarov et al. 2012, eq. 25; Pintelon and Schoukens 2012)."""
+    """Process noise (a torque disturbance on the motor) fed back by the PD loop: averaged over four
+    seeds, H1's error stays hundreds of its own variances away from the truth (a bias, towards -1/C),
+    the indirect and harmonic-mean estimators' within theirs (Makarov et al. 2012, eq. 25; Pintelon
+    and Schoukens 2012)."""
     ms = design_multisine(FS, 512, 0.5, 12.0, rms=0.01, detection_group=0, seed=1)
-    u, y, r = simulate_multisine(P_J1, [ms], 65, kp=300.0, kd=30.0, noise_sd=10.0, seed=5)
+    acc = {"h1": [], "indirect": [], "harmonic": []}
+    for seed in range(4):
+        u, y, r = simulate_multisine(P_J1, [ms], 33, kp=300.0, kd=30.0, noise_sd=10.0, seed=seed)
+        for est in acc:
+            F = estimate_frf(u, y, FS, ms.n_samples, r=r, estimator=est)
+            acc[est].append((F.G, F.var))
+    G0 = plant_frf(F.f_hz, P_J1)
     res = {}
-    for est in ("h1", "indirect", "harmonic"):
-        F = estimate_frf(u, y, FS, ms.n_samples, r=r, estimator=est)
-        G0 = plant_frf(F.f_hz, P_J1)
-        res[est] = (np.sqrt(np.mean(np.abs(F.G / G0 - 1) ** 2)), np.mean(np.abs(F.G - G0) ** 2 / F.var))
-    assert res["h1"][0] > 3 * res["indirect"][0], res
-    assert res["h1"][1] > 4, res
-    assert 0.5 < res["indirect"][1] < 2.0 and res["indirect"][0] < 0.06, res
+    for est, runs in acc.items():
+        G = np.mean([g for g, _ in runs], axis=0)
+        var = np.mean([v for _, v in runs], axis=0) / len(runs)
+        res[est] = (np.sqrt(np.mean(np.abs(G / G0 - 1) ** 2)), np.mean(np.abs(G - G0) ** 2 / var))
+    assert res["h1"][1] > 50, res
+    assert 0.3 < res["indirect"][1] < 2.0, res
+    assert res["h1"][0] > 1.2 * res["indirect"][0] and res["h1"][0] > 0.25, res
     assert res["harmonic"][0] == pytest.approx(res["indirect"][0], rel=1e-9)   # one realisation: the same
 
 
