@@ -14,6 +14,9 @@ stiffness (Jubien, Abba and Gautier 2014).
    identified from noisy data; peak and RMS of the link's tracking error before and after.
 4. Clamped stiffness: the KR500 of their Tables 1-2 and random configurations and stiffnesses of
    the same robot, both methods, error, relative SD, z RMS with the Newey-West and classic SDs.
+5. Against `identify` (output error, 16 s) on the same simulated Staubli joint, with and without
+   Coulomb friction: the algebraic estimate after each stop (the link rings and turns back) and
+   after each velocity step (it keeps its direction).
 
     python benchmarks/bench_algebraic.py            # ~1-2 min on one core
     python benchmarks/bench_algebraic.py --quick
@@ -273,6 +276,51 @@ def clamped(n):
           "|W chi - Y| / |Y| 2.82 / 1.44 % and 2.67 / 2.13 %, differences 12.1 % and 2.43 %.")
 
 
+def against_identify(quick):
+    from mocapfj.dynamics import CoulombViscous, LinearSpring, PrescribedMotor, SingleJoint, simulate
+    from mocapfj.ident.joint import identify_joint
+
+    print("\n## 5. Against identify (output error) on the same simulated joint (Staubli axis 2, 250 Hz)\n")
+    J, K, Z = 290.39, 1.0794e6, 0.163
+    D = 2 * Z * math.sqrt(K * J)
+    deg = math.pi / 180
+    fs = 250.0
+    # motor velocity: steps of +-5 deg/s in 20 ms without reversal, then stops (a smooth-step profile)
+    knots = [(0.5, 5), (2.0, 5), (3.5, -5), (5.0, -5), (6.5, -5), (8.0, 5), (9.5, -10), (11.0, -5), (12.5, 5), (14.0, 5)]
+    tf = np.arange(0, 16, 1e-3)
+    v = np.zeros_like(tf)
+    for t0, dv in knots:
+        v += dv * deg * np.clip((tf - t0) / 0.02, 0, 1) ** 2 * (3 - 2 * np.clip((tf - t0) / 0.02, 0, 1))
+    pos = np.concatenate([[0.0], np.cumsum(0.5 * (v[1:] + v[:-1]) * 1e-3)])
+    t = np.arange(0, 16, 1 / fs)
+    cases = [("no Coulomb friction", 0.0), ("Coulomb 60 N m", 60.0)] + ([] if quick else [("Coulomb 120 N m", 120.0)])
+    print("| plant | method | omega0 (rad/s) | zeta | k = J omega0^2 (N m/rad) | link reversals |")
+    print("|---|---|---|---|---|---|")
+    rng = np.random.default_rng(5)
+    for name, fc in cases:
+        plant = SingleJoint(I=J, J=30.0, b=50.0, spring=LinearSpring(k=K), friction=CoulombViscous(fc, D, smoothing=1e-3))
+        r = simulate(plant, t, PrescribedMotor.from_samples(tf, pos))
+        q = r.q[:, 0] + 2e-6 * rng.standard_normal(t.size)
+        qm = r.q_m[:, 0] + 1e-7 * rng.standard_normal(t.size)
+        u = r.u[:, 0] + 5.0 * rng.standard_normal(t.size)
+        p = identify_joint(t, q, qm, u, fs_hz=fs).to_dict()["params"]
+        I_, k_, v_ = p["I"]["value"], p["k"]["value"], p["v"]["value"]
+        print(f"| {name} | truth | {math.sqrt(K / J):.3f} | {Z:.4f} | {K:.5g} | |")
+        print(f"| {name} | identify (output error, 16 s) | {math.sqrt(k_ / I_):.3f} | {v_ / (2 * math.sqrt(k_ * I_)):.4f} | "
+              f"{k_:.5g} +- {p['k']['std']:.2g} | |")
+        for kind, sel in (("velocity step", [1, 2, 7, 8, 9]), ("stop", [3, 5])):   # velocities: knots' cumulative sums
+            res = []
+            for i in sel:
+                t0 = knots[i][0]
+                seg = slice(int(round(t0 * fs)), int(round(t0 * fs)) + 26)
+                e = algebraic_estimate(t[seg], q[seg], qm[seg])
+                res.append((e.omega0, e.zeta, e.stiffness(J)[0], e.link_reversals))
+            res = np.array(res)
+            print(f"| {name} | algebraic, 0.1 s after each {kind} ({len(sel)}) | {res[:, 0].mean():.3f} +- {res[:, 0].std():.2g} | "
+                  f"{res[:, 1].mean():.4f} +- {res[:, 1].std():.2g} | {res[:, 2].mean():.5g} | "
+                  f"{', '.join(str(int(x)) for x in res[:, 3])} |")
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="fewer cases")
@@ -283,6 +331,7 @@ def main():
     staubli(50 if a.quick else 200)
     precomp(a.quick)
     clamped(5 if a.quick else 20)
+    against_identify(a.quick)
     print(f"\n({time.time() - t0:.0f} s)")
 
 

@@ -363,6 +363,8 @@ def _cmd_algebraic(args) -> int:
             if "stiffness" in e:
                 line += f", K {e['stiffness']:.5g} +- {e['stiffness_std']:.2g} N m/rad"
             lines.append(line)
+        if "note" in j:
+            lines.append(f"  note: {j['note']}")
         if "agree" in j:
             lines.append(f"  the two estimates {'agree' if j['agree'] else 'DISAGREE'} (omega0 "
                          f"{j['agreement_sd']['omega0']:+.1f} SD, zeta {j['agreement_sd']['zeta']:+.1f} SD)")

@@ -75,6 +75,10 @@ class SecondOrderEstimate:
     fit_pct : 100 (1 - ||y - y_model|| / ||y - mean y||) of the identified model on the segment
     n_samples : int
     damping : "link" (their eq. 9) or "spring" (module docstring)
+    link_reversals : int, how often the link's velocity (of the fitted model) changes sign in the
+        segment. Each reversal flips any Coulomb friction, which the linear model cannot follow:
+        zeta (and omega0, less) are then those of the equivalent linear transient, not the joint's
+        viscous damping. A velocity change where the link keeps its direction has none.
     """
 
     method: str
@@ -92,6 +96,7 @@ class SecondOrderEstimate:
     fit_pct: float
     n_samples: int
     damping: str = "link"
+    link_reversals: int = 0
 
     def __post_init__(self) -> None:
         for f in fields(self):
@@ -117,7 +122,7 @@ class SecondOrderEstimate:
                 "lambda1": self.lambda1, "lambda2": self.lambda2, "equilibrium": self.equilibrium,
                 "t_start": self.t_start, "t_end": self.t_end, "window_s": self.t_end - self.t_start,
                 "noise_sd": self.noise_sd, "fit_pct": self.fit_pct, "n_samples": self.n_samples,
-                "damping": self.damping}
+                "damping": self.damping, "link_reversals": self.link_reversals}
 
 
 @dataclass(frozen=True)
@@ -355,6 +360,9 @@ def algebraic_estimate(t, y, u=None, *, offset: bool = True, orders=None, noise_
                          f"fit {fit:.3g} % (omega0 {omega0:.4g} rad/s, zeta {zeta:.3g})",
                          hint="no oscillation above the noise here: take the segment after a stop or a motion change")
     sd = rms if noise_sd is None else float(noise_sd)
+    v = np.gradient(model, t)
+    v = v[np.abs(v) > 0.01 * np.abs(v).max()] if np.abs(v).max() > 0 else v[:0]
+    reversals = int(np.count_nonzero(np.diff(np.sign(v)) != 0))
     # first-order noise propagation: d(theta) = A^+ (db - dA theta) = A^+ G eps
     G = wb - th[0] * wa[:, 0] - th[1] * wa[:, 1]
     Ap = np.linalg.pinv(A)
@@ -365,7 +373,8 @@ def algebraic_estimate(t, y, u=None, *, offset: bool = True, orders=None, noise_
     return SecondOrderEstimate(method="algebraic", omega0=omega0, omega0_std=float(np.sqrt(C[0, 0])), zeta=zeta,
                                zeta_std=float(np.sqrt(C[1, 1])), lambda1=float(l1), lambda2=float(l2), cov=C,
                                equilibrium=lam3 / l2 if offset else float("nan"), t_start=float(t[0]),
-                               t_end=float(t[-1]), noise_sd=sd, fit_pct=fit, n_samples=int(t.size), damping=damping)
+                               t_end=float(t[-1]), noise_sd=sd, fit_pct=fit, n_samples=int(t.size), damping=damping,
+                               link_reversals=reversals)
 
 
 def algebraic_sliding(t, y, u=None, *, window_s: float, offset: bool = True, orders=None,

@@ -66,6 +66,9 @@ def run_algebraic(csv, out: str | Path, output: str, input: str | None = None, t
     except InputError as e:
         raise InputError(csv, f"column {output!r} ({e.field})", e.expected, e.got, e.hint) from None
     joint["algebraic"] = a.to_dict()
+    if a.link_reversals:
+        joint["note"] = (f"the link reverses {a.link_reversals} time(s) in the segment: with Coulomb friction zeta is the "
+                         "transient's equivalent viscous damping (a velocity change without reversal avoids it)")
     estimates = [a]
     if u is None:
         try:

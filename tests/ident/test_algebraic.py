@@ -56,6 +56,7 @@ def test_staubli_from_80_and_100_ms_at_the_papers_noise():
                 + TRACKER_SD * rng.standard_normal(t.size)
             e = algebraic_estimate(t, y)
             assert abs(e.omega0 / W2 - 1) < 0.02 and abs(e.zeta / ZETA2 - 1) < 0.05
+            assert e.link_reversals >= 1                    # a free vibration turns back
             z += [(e.omega0 - W2) / e.omega0_std, (e.zeta - ZETA2) / e.zeta_std]
     assert 0.5 < np.sqrt(np.mean(np.square(z))) < 1.6
 
@@ -123,6 +124,7 @@ def test_precompensation_halves_the_deflection_on_the_simulator(staubli_move):
     seg = slice(int(0.3 / TS), int(0.3 / TS) + 26)                  # 0.1 s from the velocity change
     e = algebraic_estimate(ident.t[seg], q[seg], ident.q_m[seg, 0])
     assert abs(e.omega0 / W2 - 1) < 0.02 and abs(e.zeta / ZETA2 - 1) < 0.05
+    assert e.link_reversals == 0                    # the link keeps its direction: Coulomb friction stays constant
     pc = precompensate(t, ref, e.omega0, e.zeta)
     after = simulate(plant, t, PrescribedMotor.from_samples(t, pc.command))
     before = deflection_amplitude(run.q[:, 0] - ref)
