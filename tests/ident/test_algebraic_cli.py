@@ -87,6 +87,15 @@ def test_clamped_cli_kr500(tmp_path, capsys):
     for key in ("motor_torque", "wrench"):
         assert abs(j[key]["k"] / 7.81e6 - 1) < 0.02 and j[key]["k_rel_std_pct"] < 2.1
     assert (tmp_path / "o" / "table.md").read_text().count("| qm2 |") == 3
+    # the wrench alone, the robot from an MDH table file
+    mdh = np.array(KR500_MDH)
+    write_csv_columns(tmp_path / "mdh.csv", {"alpha": mdh[:, 0], "d": mdh[:, 1], "theta_offset": mdh[:, 2], "r": mdh[:, 3]})
+    rc, out, err = run(capsys, ["clamped", str(tmp_path / "log.csv"), "--positions", pos, "--wrench", "0,0,Fz,0,0,0",
+                                "--wrench-file", str(tmp_path / "ati.csv"), "--mdh", str(tmp_path / "mdh.csv"),
+                                "--joints", "2", "--out", str(tmp_path / "w"), "--json"])
+    (jw,) = json.loads(out)["joints"]
+    # q0 now from the smallest wrench instead of the smallest torques: J(q0) moves by ~1e-4 rad
+    assert rc == 0 and "motor_torque" not in jw and jw["wrench"]["k"] == pytest.approx(j["wrench"]["k"], rel=1e-3)
     # bad input: one line, exit 2, nothing written
     rc, out, err = run(capsys, ["clamped", str(tmp_path / "log.csv"), "--positions", pos, "--torques", "tau1",
                                 "--out", str(tmp_path / "bad")])
