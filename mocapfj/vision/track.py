@@ -494,26 +494,80 @@ def _triad(p: np.ndarray) -> np.ndarray:
     return np.stack([e1, np.cross(e3, e1), e3], axis=2)
 
 
+def _pair_distances_py(pos, D):  # pragma: no cover - compiled
+    """Distances D (T, P, P) between the points of every frame (inf where a point is absent) and
+    the number of pairs i < j closer than 15 m (compiled by :func:`_pair_kernels`)."""
+    T, P = pos.shape[0], pos.shape[1]
+    cnt = 0
+    for t in range(T):
+        for i in range(P):
+            for j in range(P):
+                dx = pos[t, i, 0] - pos[t, j, 0]
+                dy = pos[t, i, 1] - pos[t, j, 1]
+                dz = pos[t, i, 2] - pos[t, j, 2]
+                d = math.sqrt(dx * dx + dy * dy + dz * dz)
+                if not np.isfinite(d):
+                    d = np.inf
+                D[t, i, j] = d
+                if j > i and d < 15.0:
+                    cnt += 1
+    return cnt
+
+
+def _pair_sort_py(D, key, ti, ii, jj):  # pragma: no cover - compiled
+    """The pairs i < j of each frame closer than 15 m, sorted by key = t * 16 + d within the frame
+    (stable: ties in the order i, then j), frames in order: the order of one stable sort of all
+    keys, as frames' keys do not overlap."""
+    T, P = D.shape[0], D.shape[1]
+    kb = np.empty(P * (P - 1) // 2 + 1)
+    ib = np.empty(P * (P - 1) // 2 + 1, np.int64)
+    jb = np.empty(P * (P - 1) // 2 + 1, np.int64)
+    cnt = 0
+    for t in range(T):
+        m = 0
+        for i in range(P):
+            for j in range(i + 1, P):
+                d = D[t, i, j]
+                if d < 15.0:
+                    kb[m] = t * 16.0 + d
+                    ib[m] = i
+                    jb[m] = j
+                    m += 1
+        order = np.argsort(kb[:m], kind="mergesort")
+        for r in range(m):
+            o = order[r]
+            key[cnt] = kb[o]
+            ti[cnt] = t
+            ii[cnt] = ib[o]
+            jj[cnt] = jb[o]
+            cnt += 1
+
+
+_PAIRS = None
+
+
+def _pair_kernels():
+    """The compiled distances and sorted pairs of :class:`_PairIndex` (numba, imported on first use)."""
+    global _PAIRS
+    if _PAIRS is None:
+        from numba import njit
+        _PAIRS = (njit(cache=True)(_pair_distances_py), njit(cache=True)(_pair_sort_py))
+    return _PAIRS
+
+
 class _PairIndex:
     """Distances between the points of every frame, and the pairs of each frame sorted by distance
-    (one sort for all frames: key = frame * 16 m + distance), for finding a template's side lengths."""
+    (key = frame * 16 m + distance, ascending), for finding a template's side lengths."""
 
-    def __init__(self, pos: np.ndarray, chunk: int = 4000):
+    def __init__(self, pos: np.ndarray):
         T, P = pos.shape[:2]
         self.T, self.P = T, P
-        D = np.empty((T, P, P))
-        for f0 in range(0, T, chunk):
-            q = pos[f0:f0 + chunk]
-            diff = q[:, :, None] - q[:, None]
-            D[f0:f0 + chunk] = np.sqrt(np.einsum("tijk,tijk->tij", diff, diff))
-        D[~np.isfinite(D)] = np.inf
-        self.D = D
-        iu, ju = np.triu_indices(P, 1)
-        d = D[:, iu, ju]
-        t, k = np.nonzero(d < 15.0)
-        key = t * 16.0 + d[t, k]
-        order = np.argsort(key, kind="stable")
-        self.key, self.t, self.i, self.j = key[order], t[order], iu[k[order]], ju[k[order]]
+        distances, sort = _pair_kernels()
+        self.D = np.empty((T, P, P))
+        n = distances(np.ascontiguousarray(pos, dtype=np.float64), self.D)
+        self.key = np.empty(n)
+        self.t, self.i, self.j = (np.empty(n, np.int64) for _ in range(3))
+        sort(self.D, self.key, self.t, self.i, self.j)
 
     def near(self, length: float, tol: float, frames: np.ndarray):
         """(t, i, j), both orders, of the pairs of `frames` at `length` +- tol."""
@@ -523,6 +577,33 @@ class _PairIndex:
         idx = np.repeat(lo - np.cumsum(np.r_[0, cnt[:-1]]), cnt) + np.arange(int(cnt.sum()))
         t, i, j = self.t[idx], self.i[idx], self.j[idx]
         return np.r_[t, t], np.r_[i, j], np.r_[j, i]
+
+
+def _unique_rows(a: np.ndarray, *, return_index: bool = False, return_inverse: bool = False):
+    """``np.unique(a, axis=0, ...)`` of an integer array (n, k), by one int64 key per row (the
+    columns offset to 0 and weighted as digits) where its range fits, which sorts a 1-D array
+    instead of rows: the same rows in the same (lexicographic) order, the same first indices."""
+    a = np.asarray(a, dtype=np.int64)
+    if a.ndim != 2 or not a.shape[0]:
+        return np.unique(a, axis=0, return_index=return_index, return_inverse=return_inverse)
+    lo = a.min(axis=0)
+    span = a.max(axis=0) - lo + 1
+    if float(np.prod(span.astype(np.float64))) >= 2.0**62:
+        out = np.unique(a, axis=0, return_index=return_index, return_inverse=return_inverse)
+        if return_inverse:
+            out = out[:-1] + (out[-1].ravel(),)
+        return out
+    mult = np.ones(a.shape[1], np.int64)
+    for k in range(a.shape[1] - 2, -1, -1):
+        mult[k] = mult[k + 1] * span[k + 1]
+    key = (a - lo) @ mult
+    _, first, inv = np.unique(key, return_index=True, return_inverse=True)
+    out = (a[first],)
+    if return_index:
+        out += (first,)
+    if return_inverse:
+        out += (inv.ravel(),)
+    return out if len(out) > 1 else out[0]
 
 
 def _cluster_votes(index: _PairIndex, pos, cluster: MarkerCluster, tol: float):
@@ -578,7 +659,7 @@ def _cluster_votes(index: _PairIndex, pos, cluster: MarkerCluster, tol: float):
         hyp_a.append(assign)
     if not hyp_t:
         return np.zeros(0, int), np.zeros((0, K), int), np.zeros(0)
-    key = np.unique(np.column_stack([np.concatenate(hyp_t), np.concatenate(hyp_a)]), axis=0)
+    key = _unique_rows(np.column_stack([np.concatenate(hyp_t), np.concatenate(hyp_a)]))
     t, assign = key[:, 0], key[:, 1:]
     n = t.size
     w = (assign >= 0).astype(np.float64)
@@ -613,10 +694,8 @@ def _frame_votes(pos, tid_slot, clusters, label_index, tol, window: int = 25):
             continue
         K = assign.shape[1]
         found = (assign >= 0).sum(axis=1)
-        # keep, per frame, the hypotheses with the most markers (duplicates from several triangles once)
-        key = np.column_stack([t, assign])
-        key, first = np.unique(key, axis=0, return_index=True)
-        t, assign, sse, found = t[first], assign[first], sse[first], found[first]
+        # keep, per frame, the hypotheses with the most markers (_cluster_votes gave each once,
+        # sorted by frame)
         top = np.zeros(T, int)
         np.maximum.at(top, t, found)
         best = found == top[t]
@@ -635,9 +714,9 @@ def _frame_votes(pos, tid_slot, clusters, label_index, tol, window: int = 25):
         # assignment of labels to tracklets is a hypothesis, judged on a window of the group's frames
         trk = np.where(assign >= 0, tid_slot[t[:, None], np.maximum(assign, 0)], -1)
         members = np.sort(trk, axis=1)
-        _, gid = np.unique(members, axis=0, return_inverse=True)
+        _, gid = _unique_rows(members, return_inverse=True)
         gid = gid.ravel()
-        _, hid = np.unique(np.column_stack([gid, trk]), axis=0, return_inverse=True)
+        _, hid = _unique_rows(np.column_stack([gid, trk]), return_inverse=True)
         hid = hid.ravel()
         gid_h = np.zeros(hid.max() + 1, int)
         gid_h[hid] = gid
