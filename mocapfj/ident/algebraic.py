@@ -186,21 +186,29 @@ def check_segment(t, y, u=None, what: str = "y"):
     return t, y, u
 
 
-def quadrature_kernels(n: int, orders: tuple[int, ...]) -> dict[tuple[int, int], np.ndarray]:
+def quadrature_kernels(n: int, orders: tuple[int, ...], rule: str = "spline") -> dict[tuple[int, int], np.ndarray]:
     """Weights w (n,) with sum_k w_k y_k = P_{m,n}[y] over a window of unit length sampled at n
     uniform points: the kernel (-1)^n / (m-1)! (1 - s)^(m-1) s^n integrated exactly against the
     not-a-knot cubic spline through the samples (Gauss-Legendre, 6 nodes per interval: exact for
-    the degree <= 9 products). Keys (m, n) for every integral the equations of `orders` use."""
+    the degree <= 9 products). Keys (m, n) for every integral the equations of `orders` use.
+    ``rule="trapezoid"``: the composite trapezoidal rule on the kernel times the samples
+    (Oueslati et al. 2012, section 4.B), for comparison."""
+    if rule not in ("spline", "trapezoid"):
+        raise InputError(None, "quadrature", '"spline" or "trapezoid"', repr(rule))
     s = np.linspace(0.0, 1.0, n)
+    keys = set()
+    for m in orders:
+        keys |= {(m - 2, 2), (m - 1, 1), (m, 0), (m - 1, 2), (m, 1), (m, 2)}
+    if rule == "trapezoid":
+        w = np.full(n, 1.0 / (n - 1))
+        w[[0, -1]] = 0.5 / (n - 1)
+        return {(m, k): w * (-1) ** k / math.factorial(m - 1) * (1 - s) ** (m - 1) * s ** k for m, k in keys}
     basis = CubicSpline(s, np.eye(n), axis=0)
     xg, wg = np.polynomial.legendre.leggauss(6)
     h = s[1] - s[0]
     nodes = (s[:-1, None] + h * (xg[None, :] + 1) / 2).ravel()
     wnodes = np.tile(wg * h / 2, n - 1)
     B = basis(nodes)                                   # (n_nodes, n)
-    keys = set()
-    for m in orders:
-        keys |= {(m - 2, 2), (m - 1, 1), (m, 0), (m - 1, 2), (m, 1), (m, 2)}
     out = {}
     for m, k in keys:
         kern = (-1) ** k / math.factorial(m - 1) * (1 - nodes) ** (m - 1) * nodes ** k
@@ -294,7 +302,7 @@ def _to_omega_zeta(l1, l2, C_l):
 
 
 def algebraic_estimate(t, y, u=None, *, offset: bool = True, orders=None, noise_sd: float | None = None,
-                       damping: str = "auto") -> SecondOrderEstimate:
+                       damping: str = "auto", quadrature: str = "spline") -> SecondOrderEstimate:
     """omega0 and zeta from one segment by the algebraic estimator (Oueslati et al. 2012, eq. 13-16).
 
     Parameters
@@ -310,6 +318,8 @@ def algebraic_estimate(t, y, u=None, *, offset: bool = True, orders=None, noise_
     noise_sd : rad, the SD of y's noise; default the identified model's residual RMS on the segment.
     damping : "link" (their eq. 9), "spring", or "auto" (with u: the one whose model fits the
         segment better; without u they coincide and "link" is reported)
+    quadrature : "spline" (default) or "trapezoid" (their discretisation; at 25 samples per period
+        it is off by percents: docs/identification.md)
 
     Raises
     ------
@@ -329,7 +339,7 @@ def algebraic_estimate(t, y, u=None, *, offset: bool = True, orders=None, noise_
             for form in ("link", "spring"):
                 try:
                     fits.append(algebraic_estimate(t, y, u, offset=offset, orders=orders, noise_sd=noise_sd,
-                                                   damping=form))
+                                                   damping=form, quadrature=quadrature))
                 except InputError as e:
                     err = e
             if not fits:
@@ -341,7 +351,7 @@ def algebraic_estimate(t, y, u=None, *, offset: bool = True, orders=None, noise_
     scale = float(np.std(y - (0.0 if u is None else u))) or 1.0
     ys = (y - ref) / scale
     us = None if u is None else (u - ref) / scale
-    Q = quadrature_kernels(t.size, orders)
+    Q = quadrature_kernels(t.size, orders, quadrature)
     A, b, wa, wb = _equations(Q, ys, us, orders, offset, spring=damping == "spring")
     if not np.isfinite(A).all() or np.linalg.cond(A) > 1e12:
         raise InputError(None, "y", "a segment that determines omega0 and zeta (an oscillation)",
