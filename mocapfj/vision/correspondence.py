@@ -185,19 +185,48 @@ def _support_py(R, tv, intr, d14, a, b, X, fi, fstart, free, xy, off, gate, sets
                 cost[k] += bd * bd
 
 
-_EDGES = _SUPPORT = None
+def _bucket_order_py(bucket, x, n_buckets, order, start):  # pragma: no cover - compiled
+    """Rows with bucket >= 0 ordered by bucket (counting sort, stable), then by x within a bucket
+    (insertion sort: a bucket holds a dozen rows); start (n_buckets + 1) the first row of each
+    bucket in `order`. Compiled by :func:`_kernels`; rows with a NaN x must have bucket -1."""
+    for i in range(start.shape[0]):
+        start[i] = 0
+    for i in range(bucket.shape[0]):
+        if bucket[i] >= 0:
+            start[bucket[i] + 1] += 1
+    for b in range(n_buckets):
+        start[b + 1] += start[b]
+    fill = start[:-1].copy()
+    for i in range(bucket.shape[0]):
+        b = bucket[i]
+        if b >= 0:
+            order[fill[b]] = i
+            fill[b] += 1
+    for b in range(n_buckets):
+        for k in range(start[b] + 1, start[b + 1]):
+            r = order[k]
+            v = x[r]
+            m = k - 1
+            while m >= start[b] and x[order[m]] > v:
+                order[m + 1] = order[m]
+                m -= 1
+            order[m + 1] = r
+
+
+_EDGES = _SUPPORT = _ORDER = None
 
 
 def _kernels():
     """The compiled epipolar pairing and support search (numba, imported on first use): a frame
     holds a dozen blobs per camera, and numpy's all-pairs arrays of every frame at once cost more
     than the pairs themselves."""
-    global _EDGES, _SUPPORT
+    global _EDGES, _SUPPORT, _ORDER
     if _EDGES is None:
         from numba import njit
         _EDGES = njit(cache=True)(_edges_py)
         _SUPPORT = njit(cache=True)(_support_py)
-    return _EDGES, _SUPPORT
+        _ORDER = njit(cache=True)(_bucket_order_py)
+    return _EDGES, _SUPPORT, _ORDER
 
 
 class _Pool:
@@ -211,12 +240,13 @@ class _Pool:
         frames, dense = np.unique(det.frame, return_inverse=True)
         dense = dense.ravel()
         self.n_frames = int(frames.size)
-        # one order for all cameras: (camera, frame, x), as two stable sorts (x, then an integer key)
-        by_x = np.argsort(det.xy_px[:, 0], kind="stable")
-        order = by_x[np.argsort((det.camera.astype(np.int64) * self.n_frames + dense)[by_x], kind="stable")]
-        order = order[ok[order]]
-        cams = det.camera[order]
-        self.off = np.searchsorted(cams, np.arange(self.C + 1)).astype(np.int64)
+        # one order for all cameras: (camera, frame, x), a counting sort over (camera, frame)
+        bucket = np.where(ok, det.camera.astype(np.int64) * self.n_frames + dense, -1)
+        order = np.empty(int(ok.sum()), np.int64)
+        start = np.empty(self.C * self.n_frames + 1, np.int64)
+        _kernels()[2](bucket, np.ascontiguousarray(det.xy_px[:, 0], dtype=np.float64), self.C * self.n_frames,
+                      order, start)
+        self.off = start[::self.n_frames].astype(np.int64) if self.n_frames else np.zeros(self.C + 1, np.int64)
         self.xy_all = np.ascontiguousarray(det.xy_px[order], dtype=np.float64)
         self.free_all = np.zeros(order.size, bool)
         fid = dense[order]
@@ -227,7 +257,7 @@ class _Pool:
             self.rows.append(order[sl])
             self.frame.append(det.frame[order[sl]])
             self.fidx.append(fid[sl])
-            self.fstart[c] = self.off[c] + np.searchsorted(fid[sl], np.arange(self.n_frames + 1))
+            self.fstart[c] = start[c * self.n_frames:(c + 1) * self.n_frames + 1]
             self.xy.append(self.xy_all[sl])
             self.nrm.append(undistortion_table(rig.cameras[c]).normalized(self.xy[c]))
             self.free_all[sl] = np.isfinite(self.nrm[c][:, 0])
