@@ -27,16 +27,16 @@ def free_vibration(t, w0=W2, zeta=ZETA2, amp=1.5e-4, phase=0.3, t0=0.0, rest=1e-
 
 
 def test_exact_without_noise_free_and_forced():
-    t = np.arange(0, 0.08 + 1e-12, 1e-4)
+    t = np.arange(0, 0.08 + 1e-12, 2.5e-4)
     e = algebraic_estimate(t, free_vibration(t))
     assert e.omega0 == pytest.approx(W2, rel=1e-7) and e.zeta == pytest.approx(ZETA2, rel=1e-6)
     assert e.equilibrium == pytest.approx(1e-4, rel=1e-5)
     # forced: the link of y'' + l1 y' + l2 (y - u) = 0 driven by a motor ramp and sine (their eq. 10)
     u = 0.3 + 0.2 * t + 0.01 * np.sin(17 * t)
     y = second_order_response(t, W2, ZETA2, u, y0=0.3, v0=0.1)
-    e = algebraic_estimate(t, y, u, offset=False)
-    assert e.omega0 == pytest.approx(W2, rel=1e-7) and e.zeta == pytest.approx(ZETA2, rel=1e-6)
-    assert e.stiffness(J2)[0] == pytest.approx(K2, rel=1e-6)
+    e = algebraic_estimate(t, y, u, offset=False)       # (lsim takes u linear between samples: 1e-7)
+    assert e.omega0 == pytest.approx(W2, rel=1e-6) and e.zeta == pytest.approx(ZETA2, rel=1e-5)
+    assert e.stiffness(J2)[0] == pytest.approx(K2, rel=2e-6)
     # damping on the deflection rate instead of the link: "auto" tells the forms apart when u moves
     ys = second_order_response(t, W2, ZETA2, u, y0=0.3, v0=0.1, damping="spring")
     e = algebraic_estimate(t, ys, u)
