@@ -636,7 +636,9 @@ def build_parser() -> argparse.ArgumentParser:
                     help="model fitted to the FRF (default two_inertia: J, I, k, d, b, v; none: the FRF only)")
     fr.add_argument("--estimator", default="auto", choices=["auto", "h1", "harmonic", "indirect"],
                     help="auto (default): indirect with --reference, else harmonic mean")
-    fr.add_argument("--transient", type=int, default=1, help="periods dropped at the start of each realisation (1)")
+    fr.add_argument("--transient", default="auto",
+                    help="periods dropped at the start of each realisation (default auto: those that differ "
+                         "from the late periods beyond the noise, at least 1)")
     fr.add_argument("--realisations", type=int, default=1,
                     help="the record holds this many equal consecutive realisations (default 1)")
     fr.add_argument("--out", required=True, help="output directory")

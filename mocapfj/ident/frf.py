@@ -38,7 +38,7 @@ import numpy as np
 
 from ..errors import InputError
 
-__all__ = ["FRF", "Distortion", "estimate_frf", "FRF_ESTIMATORS"]
+__all__ = ["FRF", "Distortion", "estimate_frf", "transient_count", "FRF_ESTIMATORS"]
 
 FRF_ESTIMATORS = ("auto", "h1", "harmonic", "indirect")
 
@@ -171,6 +171,29 @@ def _excited(X, rel):
     return k if k.size and np.median(snr) > 25 else np.empty(0, int)   # noise alone passes 2 % of the lines, at SNR ~ 4-8
 
 
+def transient_count(u, y, period_samples: int) -> int:
+    """Leading periods still in the transient: those whose u or y differ from the mean of the last
+    half of the periods by more than 4x the mean-square difference of the late periods themselves
+    (the noise); at least 1 (a record's first period is not trusted). u, y (T,) or (M, T)."""
+    n = int(period_samples)
+    worst = 0
+    for x in (u, y):
+        x = np.atleast_2d(np.asarray(x, dtype=np.float64))
+        p = x.shape[1] // n
+        if p < 3:
+            return 1
+        X = x[:, : p * n].reshape(x.shape[0], p, n)
+        late = X[:, p - (p + 1) // 2:]
+        ref = late.mean(axis=1, keepdims=True)
+        d = np.mean((X - ref) ** 2, axis=(0, 2))
+        noise = np.mean(d[p - (p + 1) // 2:]) * (1 + 1e-12) + 1e-300
+        k = 0
+        while k < p - 2 and d[k] > 4 * noise:
+            k += 1
+        worst = max(worst, k)
+    return max(worst, 1)
+
+
 def estimate_frf(u, y, fs_hz: float, period_samples: int, *, r=None, estimator: str = "auto",
                  transient_periods: int = 1, lines=None, min_rel_amplitude: float = 1e-2) -> FRF:
     """FRF of y over u from periodic data (Makarov et al. 2012, eq. 23-27), open or closed loop.
@@ -187,8 +210,9 @@ def estimate_frf(u, y, fs_hz: float, period_samples: int, *, r=None, estimator: 
     r : (T,) or (M, T) or None
         The reference of a closed loop (e.g. the multisine motor-position reference).
     estimator : "auto", "h1", "harmonic" or "indirect"
-    transient_periods : int
+    transient_periods : int or "auto"
         Periods dropped at the start of each realisation (the transient); at least 2 must remain.
+        "auto": :func:`transient_count`.
     lines : (K,) int or None
         Excited DFT lines; None: those where the period-mean amplitude of r (else u) exceeds
         `min_rel_amplitude` times its largest and twice its period-to-period noise SD.
@@ -202,9 +226,14 @@ def estimate_frf(u, y, fs_hz: float, period_samples: int, *, r=None, estimator: 
         raise InputError(None, "fs_hz", "a positive sampling rate in Hz", fs_hz)
     if int(period_samples) != period_samples or period_samples < 4:
         raise InputError(None, "period_samples", "a period of at least 4 samples", period_samples)
-    if int(transient_periods) != transient_periods or transient_periods < 0:
-        raise InputError(None, "transient_periods", "a whole number >= 0", transient_periods)
-    n, skip = int(period_samples), int(transient_periods)
+    if transient_periods != "auto" and (not isinstance(transient_periods, (int, np.integer))
+                                        or transient_periods < 0):
+        raise InputError(None, "transient_periods", "a whole number >= 0 or 'auto'", transient_periods)
+    n = int(period_samples)
+    if transient_periods == "auto":
+        skip = transient_count(u, y, n)
+    else:
+        skip = int(transient_periods)
     if np.shape(np.atleast_2d(y)) != np.shape(np.atleast_2d(u)):
         raise InputError(None, "y", f"the shape of u {np.shape(u)}", np.shape(y))
     U, shape = _blocks("u", u, n, skip)

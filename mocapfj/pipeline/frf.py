@@ -85,13 +85,13 @@ def find_period(x, *, exact: bool) -> int | None:
 
 
 def run_frf(path, out, *, input: str, output: str, reference: str | None = None, time: str | None = None,
-            period_s: float | None = None, model: str = "two_inertia", transient: int = 1, realisations: int = 1,
+            period_s: float | None = None, model: str = "two_inertia", transient="auto", realisations: int = 1,
             estimator: str = "auto") -> dict:
     """``mocapfj frf``: the FRF of column `output` over column `input` (Makarov et al. 2012, eq. 23-27),
     and the two-inertia model fitted to it with its modes.
 
     The record holds `realisations` equal consecutive parts, each starting with `transient` periods
-    that are dropped. The period comes from `period_s` or, without it, from where the reference
+    that are dropped ("auto": :func:`mocapfj.ident.frf.transient_count`). The period comes from `period_s` or, without it, from where the reference
     (else the input) repeats. Writes OUT/frf.json (the summary) and OUT/frf.csv (per line: f_hz,
     the FRF, magnitude, phase, coherence, noise SD, and the model's FRF).
     """
@@ -100,9 +100,15 @@ def run_frf(path, out, *, input: str, output: str, reference: str | None = None,
 
     if model not in FRF_CLI_MODELS:
         raise InputError(None, "model", f"one of {', '.join(FRF_CLI_MODELS)}", model)
-    for name, v in (("transient", transient), ("realisations", realisations)):
-        if int(v) != v or v < (0 if name == "transient" else 1):
-            raise InputError(None, name, "a whole number " + (">= 0" if name == "transient" else ">= 1"), v)
+    if isinstance(transient, str) and transient != "auto":
+        try:
+            transient = int(transient)
+        except ValueError:
+            raise InputError(None, "transient", "a whole number >= 0 or auto", transient) from None
+    if transient != "auto" and (int(transient) != transient or transient < 0):
+        raise InputError(None, "transient", "a whole number >= 0 or auto", transient)
+    if int(realisations) != realisations or realisations < 1:
+        raise InputError(None, "realisations", "a whole number >= 1", realisations)
     names = {"--input": input, "--output": output, "--reference": reference}
     csv, cols, t = read_frf_columns(path, names, time)
     fs = (t.size - 1) / float(t[-1] - t[0])
@@ -129,14 +135,15 @@ def run_frf(path, out, *, input: str, output: str, reference: str | None = None,
     try:
         frf = estimate_frf(parts(cols["--input"]), parts(cols["--output"]), fs, n,
                            r=parts(cols["--reference"]) if "--reference" in cols else None, estimator=estimator,
-                           transient_periods=int(transient))
+                           transient_periods=transient if transient == "auto" else int(transient))
     except InputError as e:
         if e.file == "<argument>" and e.field in col_of:
             raise InputError(csv, f"column {col_of[e.field]!r}", e.expected, e.got, e.hint) from None
         raise
     fit = fit_two_inertia(frf) if model == "two_inertia" else None
     summary = {"file": str(csv), "input": input, "output": output, "reference": reference, "fs_hz": fs,
-               "period_s": n / fs, "period_samples": n, "frf": frf.to_dict(),
+               "period_s": n / fs, "period_samples": n,
+               "transient_periods": T // n - frf.n_periods if T // n >= frf.n_periods else None, "frf": frf.to_dict(),
                "model": None if fit is None else fit.to_dict(),
                "modes": [] if fit is None else [m.to_dict() for m in fit.modes],
                "files": {"summary": "frf.json", "frf": "frf.csv"}}

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from mocapfj.errors import InputError
-from mocapfj.ident.frf import estimate_frf
+from mocapfj.ident.frf import estimate_frf, transient_count
 from mocapfj.ident.multisine import design_multisine, multisine_realisations
 
 from .frf_sim import plant_frf, simulate_multisine
@@ -104,6 +104,19 @@ def test_distortion_at_the_detection_lines(power, even, odd):
         assert D.even_db > D.noise_db + 20
     if odd:
         assert D.odd_db > D.noise_db + 20
+
+
+def test_transient_periods_found():
+    """A decaying transient over the first periods: 'auto' drops them (and at least one period)."""
+    ms, u, y = _open_loop(n=512, periods=8, y_noise=1e-6, seed=2)
+    assert transient_count(u, y, 512) == 1                                # steady: the first period only
+    t = np.arange(y.shape[1]) / FS
+    yt = y + 0.05 * np.abs(y).max() * np.exp(-t / 1.2) * np.cos(2 * np.pi * 5.0 * t)   # tau 1.2 s, periods of 1.54 s
+    k = transient_count(u, yt, 512)
+    assert 3 <= k <= 6
+    F = estimate_frf(u, yt, FS, 512, transient_periods="auto")
+    assert F.n_periods == 8 - k
+    assert np.median(np.abs(F.G / plant_frf(F.f_hz, P_J1) - 1)) < 1e-3
 
 
 def test_bad_input():
