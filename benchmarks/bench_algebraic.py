@@ -229,12 +229,13 @@ def precomp(quick):
             acc = lambda x: 250 * deg * ((x > 0.3) & (x < 0.32))                                 # noqa: E731
             idr = simulate(plant, ti, PrescribedMotor(lambda x: (pos(x), vel(x), acc(x) + 0 * x)))
             seg = slice(75, 101)
-            for label, sd, form in (("noise 1e-7, damping auto", 1e-7, "auto"),
-                                    ("noise 1e-6, damping auto", 1e-6, "auto"),
-                                    ("noise 1e-7, damping link (their eq. 9)", 1e-7, "link")):
+            for label, sd, form, method in (("eq. 17, noise 1e-7, damping auto", 1e-7, "auto", "eq17"),
+                                            ("eq. 17, noise 1e-6, damping auto", 1e-6, "auto", "eq17"),
+                                            ("eq. 17, noise 1e-7, damping link (their eq. 9)", 1e-7, "link", "eq17"),
+                                            ("model inverse, noise 1e-7, damping auto", 1e-7, "auto", "inverse")):
                 q = idr.q[:, 0] + sd * rng.standard_normal(ti.size)
                 e = algebraic_estimate(ti[seg], q[seg], idr.q_m[seg, 0], damping=form)
-                pc = precompensate(t, ref, e.omega0, e.zeta, damping=e.damping)
+                pc = precompensate(t, ref, e.omega0, e.zeta, damping=e.damping, method=method)
                 after = simulate(plant, t, PrescribedMotor.from_samples(t, pc.command))
                 b0, b1 = deflection_amplitude(run.q[:, 0] - ref), deflection_amplitude(after.q[:, 0] - ref)
                 print(f"| {pname} | {mname} | {label} -> {e.damping} (f0 {e.f0_hz:.3f} Hz, zeta {e.zeta:.3f}) | "

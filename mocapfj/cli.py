@@ -383,12 +383,15 @@ def _cmd_precompensate(args) -> int:
     from .pipeline.algebraic import run_precompensate
 
     s = run_precompensate(args.csv, _work(args), reference=args.reference, time=args.time, omega0=args.omega0,
-                          zeta=args.zeta, model=args.model, iterations=args.iterations, damping=args.damping)
+                          zeta=args.zeta, model=args.model, iterations=args.iterations, damping=args.damping,
+                          method=args.method)
 
     def human(s):
-        return (f"pre-compensated {s['reference']} (omega0 {s['omega0']:.5g} rad/s, zeta {s['zeta']:.4g}): the model's "
-                f"link error {s['predicted_peak_before']:.3g} -> {s['predicted_peak_after']:.3g} rad peak "
-                f"({s['predicted_peak_ratio']:.1f}x)\n  wrote {args.out}/command.csv, precompensate.json")
+        warn = ("\n  the reference has content near the resonance, which eq. 17 amplifies: --method inverse, or a "
+                "jerk-limited reference" if s["predicted_peak_ratio"] < 1 else "")
+        return (f"pre-compensated {s['reference']} ({s['method']}, omega0 {s['omega0']:.5g} rad/s, zeta {s['zeta']:.4g}): "
+                f"the model's link error {s['predicted_peak_before']:.3g} -> {s['predicted_peak_after']:.3g} rad peak "
+                f"({s['predicted_peak_ratio']:.1f}x){warn}\n  wrote {args.out}/command.csv, precompensate.json")
 
     _emit(args, s, human)
     return 0
@@ -599,6 +602,8 @@ def build_parser() -> argparse.ArgumentParser:
     pc.add_argument("--zeta", type=float, default=None, help="damping ratio")
     pc.add_argument("--model", default=None, help="algebraic.json from mocapfj algebraic (instead of --omega0/--zeta)")
     pc.add_argument("--iterations", type=int, default=1, help="1: their law; more repeat the correction on the model")
+    pc.add_argument("--method", default="eq17", choices=["eq17", "inverse"],
+                    help="eq17: their law (default); inverse: the command whose simulated link is the reference")
     pc.add_argument("--damping", default=None, choices=["link", "spring"],
                     help="the model's damping form (default: the one in --model, else link)")
     pc.add_argument("--out", required=True, help="output directory")

@@ -39,8 +39,9 @@ class Precompensation:
     predicted_error_before : (T,) rad, link - reference the model predicts for the plain reference
     predicted_error_after : (T,) rad, the same for the command
     omega0, zeta : the model used
-    iterations : int
+    iterations : int (0 for the model inverse)
     damping : "link" or "spring" (:mod:`.algebraic`)
+    method : "eq17" or "inverse" (:func:`precompensate`)
     """
 
     t: np.ndarray
@@ -52,6 +53,7 @@ class Precompensation:
     zeta: float
     iterations: int
     damping: str = "link"
+    method: str = "eq17"
 
     def __post_init__(self) -> None:
         for f in fields(self):
@@ -63,6 +65,7 @@ class Precompensation:
         b = deflection_amplitude(self.predicted_error_before)
         a = deflection_amplitude(self.predicted_error_after)
         return {"omega0": self.omega0, "zeta": self.zeta, "iterations": self.iterations, "damping": self.damping,
+                "method": self.method,
                 "n_samples": int(self.t.size), "predicted_peak_before": b["peak"],
                 "predicted_peak_after": a["peak"], "predicted_rms_before": b["rms"], "predicted_rms_after": a["rms"],
                 "predicted_peak_ratio": b["peak"] / a["peak"] if a["peak"] > 0 else float("inf"),
@@ -76,8 +79,15 @@ def deflection_amplitude(e) -> dict:
 
 
 def precompensate(t, reference, omega0: float, zeta: float, *, iterations: int = 1,
-                  damping: str = "link") -> Precompensation:
+                  damping: str = "link", method: str = "eq17") -> Precompensation:
     """The pre-compensated command for `reference` (Oueslati et al. 2012, eq. 17).
+
+    Their law leaves (1 - H) times the deflection, H the model's response: it shrinks what lies
+    well below the resonance and amplifies what lies near it (a reference whose acceleration
+    jumps). ``method="inverse"`` inverts the model instead: the command whose simulated link is
+    the reference, u = r + (r'' + 2 zeta omega0 r') / omega0^2 (link damping), or the solution of
+    2 zeta omega0 u' + omega0^2 u = r'' + 2 zeta omega0 r' + omega0^2 r (spring damping), with r'
+    and r'' from the cubic spline through the reference.
 
     Parameters
     ----------
@@ -86,6 +96,7 @@ def precompensate(t, reference, omega0: float, zeta: float, *, iterations: int =
     iterations : 1 for their law; more repeat the correction on the model
     damping : "link" (their eq. 9) or "spring": the form the estimate was made with
         (``SecondOrderEstimate.damping``)
+    method : "eq17" (their law, repeated `iterations` times) or "inverse"
     """
     dims: dict = {}
     t = check_array(t, "t", ("T",), dims=dims)
@@ -97,18 +108,37 @@ def precompensate(t, reference, omega0: float, zeta: float, *, iterations: int =
     iterations = check_int(iterations, "iterations", lo=1, hi=50)
     if damping not in ("link", "spring"):
         raise InputError(None, "damping", '"link" or "spring"', repr(damping))
+    if method not in ("eq17", "inverse"):
+        raise InputError(None, "method", '"eq17" or "inverse"', repr(method))
 
     def link(u):
         return second_order_response(t, omega0, zeta, u, y0=float(u[0]), damping=damping)
 
     before = link(r) - r
-    cmd = r.copy()
-    err = before
-    for _ in range(iterations):
-        cmd = cmd - err
+    if method == "inverse":
+        from scipy import signal
+        from scipy.interpolate import CubicSpline
+
+        sp = CubicSpline(t, r)
+        r1, r2 = sp(t, 1), sp(t, 2)
+        l1, l2 = 2 * zeta * omega0, omega0 ** 2
+        if damping == "link" or l1 == 0:
+            cmd = r + (r2 + l1 * r1) / l2
+        else:
+            rhs = (r2 + l1 * r1 + l2 * r) / l1
+            first = signal.StateSpace([[-l2 / l1]], [[1.0]], [[1.0]], [[0.0]])
+            _, cmd, _ = signal.lsim(first, rhs, t - t[0], X0=[r[0]])
+            cmd = np.asarray(cmd, dtype=np.float64)
         err = link(cmd) - r
+        iterations = 0
+    else:
+        cmd = r.copy()
+        err = before
+        for _ in range(iterations):
+            cmd = cmd - err
+            err = link(cmd) - r
     return Precompensation(t=t, reference=r, command=cmd, predicted_error_before=before, predicted_error_after=err,
-                           omega0=omega0, zeta=zeta, iterations=iterations, damping=damping)
+                           omega0=omega0, zeta=zeta, iterations=iterations, damping=damping, method=method)
 
 
 def jerk_limited_profile(t, start: float, stop: float, v_max: float, a_max: float, j_max: float,

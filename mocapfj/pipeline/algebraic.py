@@ -101,7 +101,7 @@ def run_algebraic(csv, out: str | Path, output: str, input: str | None = None, t
 
 def run_precompensate(csv, out: str | Path, reference: str, time: str = "time", omega0: float | None = None,
                       zeta: float | None = None, model: str | Path | None = None, iterations: int = 1,
-                      damping: str | None = None) -> dict:
+                      damping: str | None = None, method: str = "eq17") -> dict:
     """``mocapfj precompensate``: the motor command of Oueslati et al. (2012), eq. 17, for the
     reference column of a CSV, from omega0 and zeta (given, or the algebraic estimate in an
     algebraic.json, with the damping form it chose). Writes OUT/command.csv (time, reference, command, and the link's error the
@@ -127,7 +127,7 @@ def run_precompensate(csv, out: str | Path, reference: str, time: str = "time", 
     r = _column(csv, cols, reference)
     _finite(csv, time, t)
     _finite(csv, reference, r)
-    p = precompensate(t, r, omega0, zeta, iterations=iterations, damping=damping or "link")
+    p = precompensate(t, r, omega0, zeta, iterations=iterations, damping=damping or "link", method=method)
     write_csv_columns(out / "command.csv", {time: t, reference: r, "command": p.command,
                                             "predicted_error_before": p.predicted_error_before,
                                             "predicted_error_after": p.predicted_error_after})
