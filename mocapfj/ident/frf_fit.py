@@ -128,26 +128,32 @@ def _fz(p):
 
 
 def _initial(frf: FRF, output: str):
-    """Starting points from the FRF's shape: rigid-body inertia and viscosity below the first mode,
-    the mode frequencies from |G| w^2 (flat for a double integrator)."""
+    """Starting points from the FRF's shape: rigid-body inertia M and viscosity B from the lowest
+    lines, the mode frequencies from the dip and the peak of |G (M s^2 + B s)| (flat for a rigid
+    body), then M and B again below the first mode."""
     f, G = frf.f_hz, frf.G
     w = 2 * np.pi * f
-    a = np.abs(G) * w ** 2
+
+    def rigid(low):
+        """M, B of 1/G = M s^2 + B s on the lines `low` (linear least squares)."""
+        Z = 1.0 / G[low]
+        A = np.column_stack([-w[low] ** 2, 1j * w[low]])
+        mb = np.linalg.lstsq(np.vstack([A.real, A.imag]), np.concatenate([Z.real, Z.imag]), rcond=None)[0]
+        M = abs(mb[0]) if mb[0] != 0 else 1.0 / (np.abs(G[low][0]) * w[low][0] ** 2)
+        return M, max(mb[1], 1e-6 * M * w[0])
+
+    M, B = rigid(np.arange(f.size) < min(3, f.size))
+    a = np.abs(G * (-M * w ** 2 + 1j * B * w))       # ~1 below the modes: the rigid body divided out
     ia = int(np.argmin(a)) if output == "motor" else 0
     ir = ia + int(np.argmax(a[ia:]))
     if output == "motor" and (ia in (0, f.size - 1) or ir == ia):
         raise InputError(None, "frf", "an anti-resonance and a resonance inside the excited band (motor side)",
-                         f"|G| w^2 without a dip then a peak over {f[0]:.3g}-{f[-1]:.3g} Hz",
+                         f"|G| (M s^2 + B s) without a dip then a peak over {f[0]:.3g}-{f[-1]:.3g} Hz",
                          hint="widen the multisine band around the joint's modes")
     f_first = f[ia] if output == "motor" else f[ir]
     low = f < 0.6 * f_first
-    if low.sum() < 2:
-        low = np.arange(f.size) < 2
-    Z = 1.0 / G[low]
-    A = np.column_stack([-w[low] ** 2, 1j * w[low]])
-    mb = np.linalg.lstsq(np.vstack([A.real, A.imag]), np.concatenate([Z.real, Z.imag]), rcond=None)[0]
-    M = abs(mb[0]) if mb[0] != 0 else 1.0 / a[0]
-    B = max(mb[1], 1e-6 * M * w[0])
+    if low.sum() >= 2:
+        M, B = rigid(low)
     starts = []
     if output == "motor":
         wa, wr = w[ia], w[ir]
@@ -219,8 +225,10 @@ def fit_two_inertia(frf: FRF, *, output: str = "motor", fixed: dict | None = Non
         return np.where(log, np.exp(np.clip(th, -700, 700)), th)
 
     def resid(x):
-        e = (G - two_inertia_frf(f, *natural(full(x)), output=output)) / sd
-        return np.concatenate([e.real, e.imag])
+        with np.errstate(all="ignore"):              # a trial step far out: a large residual, not a warning
+            e = (G - two_inertia_frf(f, *natural(full(x)), output=output)) / sd
+            r = np.concatenate([e.real, e.imag])
+        return np.where(np.isfinite(r), r, 1e150)
 
     lb = np.where(log, -np.inf, 0.0)[free]
     best = None

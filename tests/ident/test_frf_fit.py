@@ -20,6 +20,7 @@ FS = 1 / 0.003
 J1 = dict(J=0.75, I=1.165, k=1150.0, d=1.0, b=0.8, v=0.3)        # 5.0 / 8.0 Hz
 J2 = dict(J=0.1938, I=0.2752, k=220.0, d=0.15, b=0.1, v=0.05)    # 4.5 / 7.0 Hz
 STIFF = dict(J=0.02, I=0.3, k=3000.0, d=0.5, b=0.05, v=0.2)      # 15.9 / 63.7 Hz, light motor
+DAMPED = dict(J=0.75, I=1.165, k=1150.0, d=1.0, b=8.0, v=12.0)   # friction above the inertia below 1 Hz, zeta 0.18
 
 
 @pytest.mark.parametrize("output", ["motor", "link"])
@@ -46,7 +47,8 @@ def _closed_loop_frf(p, f_max, seed, kp, kd, n=2048, periods=5, m=2, noise=2.0):
 
 
 @pytest.mark.parametrize("p, f_max, kp, kd", [(J1, 12.0, 300.0, 30.0), (J2, 12.0, 60.0, 6.0),
-                                              (STIFF, 100.0, 100.0, 3.0)], ids=["assist_j1", "assist_j2", "stiff"])
+                                              (STIFF, 100.0, 100.0, 3.0), (DAMPED, 12.0, 300.0, 30.0)],
+                         ids=["assist_j1", "assist_j2", "stiff", "damped"])
 def test_closed_loop_fit_recovers_the_joint(p, f_max, kp, kd):
     """Closed loop, process noise, indirect FRF: k within 3 %, every parameter and mode within 4 SDs."""
     truth = two_inertia_modes(**p)
