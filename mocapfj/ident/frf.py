@@ -155,18 +155,23 @@ def _blocks(name, x, n_samples, skip):
     return np.fft.rfft(x, axis=-1) * (2.0 / n_samples), x.shape
 
 
-def _excited(X, rel):
-    """Lines whose period-mean amplitude exceeds `rel` x the largest and 2x its own period-to-period
-    noise SD (a periodic excitation there, not noise; DC and Nyquist excluded); none when their
-    median power SNR is below 25 (no periodic excitation at all, or a wrong period)."""
+def _excitation(X, rel):
+    """(a2, mask): per line the mean power of the period means, and whether it exceeds `rel`^2 x the
+    largest and 4x its own period-to-period noise variance (DC and Nyquist never)."""
     P = X.shape[1]
     Xm = X.mean(axis=1)
     a2 = np.mean(np.abs(Xm) ** 2, axis=0)
     noise = np.mean(np.sum(np.abs(X - Xm[:, None]) ** 2, axis=1), axis=0) / ((P - 1) * P)
     a2[0] = a2[-1] = 0.0
-    if a2.max() <= 0:
-        return np.empty(0, int)
-    k = np.flatnonzero((a2 > rel ** 2 * a2.max()) & (a2 > 4 * noise))
+    return a2, noise, (a2 > rel ** 2 * a2.max()) & (a2 > 4 * noise) if a2.max() > 0 else np.zeros(a2.size, bool)
+
+
+def _excited(X, rel):
+    """Lines whose period-mean amplitude exceeds `rel` x the largest and 2x its own period-to-period
+    noise SD (a periodic excitation there, not noise; DC and Nyquist excluded); none when their
+    median power SNR is below 25 (no periodic excitation at all, or a wrong period)."""
+    a2, noise, mask = _excitation(X, rel)
+    k = np.flatnonzero(mask)
     snr = a2[k] / np.maximum(noise[k], 1e-300)
     return k if k.size and np.median(snr) > 25 else np.empty(0, int)   # noise alone passes 2 % of the lines, at SNR ~ 4-8
 
@@ -257,6 +262,13 @@ def estimate_frf(u, y, fs_hz: float, period_samples: int, *, r=None, estimator: 
         k = np.unique(np.asarray(lines, dtype=int))
         if k.size == 0 or k.min() < 1 or k.max() >= n // 2:
             raise InputError(None, "lines", f"DFT lines within 1..{n // 2 - 1}", k)
+        _, _, mask = _excitation(R if R is not None else U, 1e-3)
+        if not mask[k].all():
+            bad = k[~mask[k]][0]
+            raise InputError(None, "lines", f"excited frequencies only (the {'reference' if R is not None else 'input'} "
+                             "above 1e-3 of its largest line and above its noise)",
+                             f"{bad * fs_hz / n:.6g} Hz (line {bad}) not excited",
+                             hint="a singular input spectrum there: excite it or leave it out")
 
     Um, Ym = U.mean(axis=1)[:, k], Y.mean(axis=1)[:, k]                       # (M, K)
     dU, dY = U[:, :, k] - Um[:, None], Y[:, :, k] - Ym[:, None]
@@ -267,7 +279,7 @@ def estimate_frf(u, y, fs_hz: float, period_samples: int, *, r=None, estimator: 
     weak = au <= 1e-9 * max(au.max(), 1e-300)
     if weak.any():
         mi, ki = np.argwhere(weak)[0]
-        raise InputError(None, "u", "an input spectrum above its noise at every excited frequency",
+        raise InputError(None, "u", "a non-zero input spectrum at every excited frequency",
                          f"|U| = {au[mi, ki]:.3g} (largest {au.max():.3g}) at "
                          f"{k[ki] * fs_hz / n:.6g} Hz in realisation {mi + 1}",
                          hint="that frequency is not excited (a singular input spectrum): excite it or leave it out")

@@ -87,6 +87,8 @@ def test_realisations_harmonic_and_indirect_agree_and_total_variance():
         assert F.var_total is not None and F.var_total.shape == F.var.shape
     d = Fi.to_dict()
     assert len(d["frequencies_hz"]) == len(d["magnitude"]) == len(d["coherence"]) == Fi.lines.size
+    with pytest.raises(InputError, match="not excited"):                 # u has noise there, r nothing
+        estimate_frf(u, y, FS, 1024, r=r, lines=np.r_[ms.lines, ms.detection_even[:1]])
 
 
 @pytest.mark.parametrize("power, even, odd", [(0, False, False), (2, True, False), (3, False, True)])
