@@ -1,0 +1,224 @@
+"""Frequency-domain identification (mocapfj.ident.multisine, .frf, .frf_fit): accuracy and calibration.
+
+1. Grid: three joints (ASSIST-like j1 K 1150 and j2 K 220 N m/rad of Makarov et al. 2012, a stiff joint with
+   a light motor) x three process-noise levels x seeds, closed loop (motor PD), odd random-phase multisines,
+   simulated by the independent state-space simulation of tests/ident/frf_sim.py. Per cell: the largest
+   stiffness error, the RMS z-score of k, I, J and of the modes' frequencies and damping ratios (1 when the
+   SDs are right), the reduced chi-square.
+2. H1 against the indirect / harmonic-mean estimators under closed-loop process noise: the FRF's RMS relative
+   error, mean |G - G0|^2 / var (the estimator's own variance; 1 when unbiased) and the stiffness fitted.
+3. Periods and realisations: z-score calibration of the fit against M (P - 1), the variance's degrees of freedom.
+4. ASSIST reproduction with mocapfj's own simulator (mocapfj.dynamics.simulate, a PD motor loop playing the
+   multisine as q_ref through mocapfj.synth.scenario.reference_trajectory, a link-side torque disturbance,
+   the controller log with resolver quantisation and torque noise): Ts = 3 ms, N_p = 4096, odd multisine
+   0.5-12 Hz, 5 realisations, harmonic-mean estimator (Makarov et al. 2012, §5.2); the paper's K1 = 1150 and
+   K2 = 220 N m/rad and modes between 4.5 and 8.5 Hz. The inertias are ours (the paper gives none).
+5. A motor-side controller log only (no reference column, no period given) through `mocapfj frf`'s pipeline.
+
+    .venv/bin/python benchmarks/bench_frf.py [--quick] [--no-assist]
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "tests" / "ident"))
+
+from frf_sim import plant_frf, simulate_multisine  # noqa: E402
+
+from mocapfj.errors import InputError  # noqa: E402
+from mocapfj.ident.frf import estimate_frf  # noqa: E402
+from mocapfj.ident.frf_fit import TWO_INERTIA_PARAMS, fit_two_inertia, two_inertia_modes  # noqa: E402
+from mocapfj.ident.multisine import design_multisine, multisine_realisations  # noqa: E402
+
+FS = 1 / 0.003
+JOINTS = {
+    "assist_j1": (dict(J=0.75, I=1.165, k=1150.0, d=1.0, b=0.8, v=0.3), 12.0, 300.0, 30.0),
+    "assist_j2": (dict(J=0.1938, I=0.2752, k=220.0, d=0.15, b=0.1, v=0.05), 12.0, 60.0, 6.0),
+    "stiff": (dict(J=0.02, I=0.3, k=3000.0, d=0.5, b=0.05, v=0.2), 100.0, 100.0, 3.0),
+}
+NOISE = {"assist_j1": (0.5, 2.0, 5.0), "assist_j2": (0.1, 0.4, 1.0), "stiff": (0.2, 1.0, 3.0)}
+
+
+def _fit_row(p, fit):
+    truth = two_inertia_modes(**p)
+    z = [(fit.params[n].value - p[n]) / fit.params[n].std for n in ("k", "I", "J")]
+    z += [(m.f_hz - t[1]) / m.f_hz_std for m, t in zip(fit.modes, truth)]
+    z += [(m.zeta - t[2]) / m.zeta_std for m, t in zip(fit.modes, truth)]
+    return abs(fit.value("k") / p["k"] - 1) * 100, z, fit.chi2_red
+
+
+def grid(seeds, periods=5, m=2):
+    print("\n## 1. Grid: closed loop, process noise, indirect estimator, "
+          f"{m} realisations x {periods - 1} periods of 2048 samples at 333 Hz\n")
+    print("| joint | noise SD (N m) | runs | max k err % | z RMS k | z RMS I | z RMS J | z RMS f_a | z RMS f_r "
+          "| z RMS zeta_a | z RMS zeta_r | chi2/dof |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|")
+    for name, (p, fmax, kp, kd) in JOINTS.items():
+        for noise in NOISE[name]:
+            errs, zs, chis = [], [], []
+            for seed in seeds:
+                ms = design_multisine(FS, 2048, 0.5, fmax, rms=0.01, seed=seed)
+                u, y, r = simulate_multisine(p, multisine_realisations(ms, m, seed=1000 + seed), periods, kp=kp, kd=kd,
+                                             noise_sd=noise, seed=seed)
+                e, z, c = _fit_row(p, fit_two_inertia(estimate_frf(u, y, FS, 2048, r=r)))
+                errs.append(e)
+                zs.append(z)
+                chis.append(c)
+            zr = np.sqrt(np.mean(np.square(zs), axis=0))
+            print(f"| {name} | {noise:g} | {len(seeds)} | {max(errs):.2f} | " + " | ".join(f"{x:.2f}" for x in zr)
+                  + f" | {np.mean(chis):.2f} |")
+
+
+def h1_bias(seeds):
+    print("\n## 2. H1 against indirect and harmonic mean under closed-loop process noise (assist_j1, 1 realisation "
+          "x 64 periods of 512 samples)\n")
+    print("| noise SD (N m) | estimator | FRF RMS rel. error | mean abs(G - G0)^2 / var | k err % (fit) |")
+    print("|---|---|---|---|---|")
+    p, _, kp, kd = JOINTS["assist_j1"]
+    ms = design_multisine(FS, 512, 0.5, 12.0, rms=0.01, detection_group=0, seed=1)
+    for noise in (2.0, 5.0, 10.0):
+        res = {e: ([], [], []) for e in ("h1", "indirect", "harmonic")}
+        for seed in seeds:
+            u, y, r = simulate_multisine(p, [ms], 65, kp=kp, kd=kd, noise_sd=noise, seed=seed)
+            for est in res:
+                F = estimate_frf(u, y, FS, 512, r=r, estimator=est)
+                G0 = plant_frf(F.f_hz, p)
+                res[est][0].append(np.sqrt(np.mean(np.abs(F.G / G0 - 1) ** 2)))
+                res[est][1].append(np.mean(np.abs(F.G - G0) ** 2 / F.var))
+                try:
+                    res[est][2].append(abs(fit_two_inertia(F).value("k") / p["k"] - 1) * 100)
+                except InputError:
+                    res[est][2].append(np.nan)
+        for est, (e, z, k) in res.items():
+            kt = "fit failed (no anti-resonance left)" if np.all(np.isnan(k)) else f"{np.nanmean(k):.2f}" + (
+                f" ({np.isnan(k).sum()} failed)" if np.isnan(k).any() else "")
+            print(f"| {noise:g} | {est} | {np.mean(e):.4f} | {np.mean(z):.2f} | {kt} |")
+
+
+def calibration(seeds):
+    print("\n## 3. SD calibration against the variance's degrees of freedom (assist_j1, noise 2 N m)\n")
+    print("| periods P | realisations M | M (P - 1) | max k err % | z RMS k | z RMS f_a | z RMS f_r | chi2/dof |")
+    print("|---|---|---|---|---|---|---|---|")
+    p, fmax, kp, kd = JOINTS["assist_j1"]
+    for P, M in ((2, 1), (3, 1), (4, 2), (8, 1), (4, 5)):
+        errs, zs, chis = [], [], []
+        for seed in seeds:
+            ms = design_multisine(FS, 2048, 0.5, fmax, rms=0.01, seed=seed)
+            u, y, r = simulate_multisine(p, multisine_realisations(ms, M, seed=2000 + seed), P + 1, kp=kp, kd=kd,
+                                         noise_sd=2.0, seed=seed)
+            e, z, c = _fit_row(p, fit_two_inertia(estimate_frf(u, y, FS, 2048, r=r)))
+            errs.append(e)
+            zs.append(z)
+            chis.append(c)
+        zr = np.sqrt(np.mean(np.square(zs), axis=0))
+        print(f"| {P} | {M} | {M * (P - 1)} | {max(errs):.2f} | {zr[0]:.2f} | {zr[3]:.2f} | {zr[4]:.2f} | "
+              f"{np.mean(chis):.2f} |")
+
+
+def assist(n_real=5, periods=3):
+    from mocapfj.dynamics import CoulombViscous, LinearSpring, SingleJoint
+    from mocapfj.dynamics.simulate import PID, controller_log, simulate
+    from mocapfj.synth.scenario import reference_trajectory
+
+    print(f"\n## 4. ASSIST (Makarov et al. 2012) with mocapfj.dynamics.simulate: Ts 3 ms, N_p 4096, odd multisine "
+          f"0.5-12 Hz, {n_real} realisations x {periods} periods (first dropped)\n")
+    print("| joint | K paper (N m/rad) | estimator | K fitted | K err % | K SD % | anti-resonance (Hz) | resonance (Hz) "
+          "| zeta_a | zeta_r | true modes (Hz) | sim s |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|")
+    N = 4096
+    for name, noise in (("assist_j1", 0.5), ("assist_j2", 0.1)):
+        p, fmax, kp, kd = JOINTS[name]
+        model = SingleJoint(I=p["I"], J=p["J"], spring=LinearSpring(p["k"]), b=p["b"], d=p["d"],
+                            friction=CoulombViscous(0.0, p["v"]))
+        ms = design_multisine(FS, N, 0.5, fmax, rms=0.01, seed=3)
+        U, Y, R = [], [], []
+        t0 = time.time()
+        for i, real in enumerate(multisine_realisations(ms, n_real, seed=40)):
+            ref = reference_trajectory(real.to_reference())
+            t = np.arange(periods * N) / FS
+            rng = np.random.default_rng(50 + i)
+            w = rng.normal(0.0, noise, t.size)
+            res = simulate(model, t, PID(ref, kp=kp, kd=kd), tau_ext=lambda tt, w=w: np.interp(tt, t, w),
+                           rtol=1e-6, atol=1e-9)
+            log = controller_log(res, FS, rng=rng, quantum_rad=2 * np.pi / 2 ** 20, current_noise_sd=0.01 * noise)
+            n = min(log.t.size, t.size)
+            U.append(log.tau[:n, 0])
+            Y.append(log.q_m[:n, 0])
+            R.append(ref(log.t[:n])[0])
+        sim_s = time.time() - t0
+        true = ", ".join(f"{f:.4f}" for _, f, _ in two_inertia_modes(**p))
+        for est in ("harmonic", "indirect"):
+            F = estimate_frf(np.array(U), np.array(Y), FS, N, r=np.array(R), estimator=est)
+            fit = fit_two_inertia(F)
+            k = fit.params["k"]
+            fa, fr = fit.modes
+            print(f"| {name} | {p['k']:g} | {est} | {k.value:.1f} | {100 * (k.value / p['k'] - 1):+.2f} | "
+                  f"{100 * k.std / k.value:.2f} | {fa.f_hz:.4f} +- {fa.f_hz_std:.2g} | {fr.f_hz:.4f} +- {fr.f_hz_std:.2g} "
+                  f"| {fa.zeta:.4f} | {fr.zeta:.4f} | {true} | {sim_s:.0f} |")
+
+
+def motor_only():
+    """A log as a robot controller writes it (mocapfj.dynamics.controller_log: resolver quantisation,
+    torque noise), closed loop, a 2 s ramp, no reference column, no period given: `mocapfj frf`
+    finds the period from the input and the transient from the data (pipeline.frf.run_frf)."""
+    import tempfile
+
+    from mocapfj.dynamics import CoulombViscous, LinearSpring, SingleJoint
+    from mocapfj.dynamics.simulate import PID, controller_log, simulate
+    from mocapfj.io.csvio import write_csv_columns
+    from mocapfj.pipeline.frf import run_frf
+    from mocapfj.synth.scenario import reference_trajectory
+
+    print("\n## 5. Motor-side controller log only (mocapfj.dynamics.simulate, 200 Hz, period 5.12 s, 5 periods, "
+          "no reference, no period given)\n")
+    print("| joint | k err % | k SD % | anti-resonance err % | resonance err % | periods used | sim s |")
+    print("|---|---|---|---|---|---|---|")
+    p, _, kp, kd = JOINTS["assist_j2"]
+    model = SingleJoint(I=p["I"], J=p["J"], spring=LinearSpring(p["k"]), b=p["b"], d=p["d"],
+                        friction=CoulombViscous(0.0, p["v"]))
+    fs, N, P = 200.0, 1024, 5
+    ms = design_multisine(fs, N, 0.5, 20.0, rms=0.02, seed=2)
+    ref = reference_trajectory(ms.to_reference(ramp_s=2.0))
+    t = np.arange(P * N) / fs
+    w = np.random.default_rng(1).normal(0, 0.2, t.size)
+    t0 = time.time()
+    res = simulate(model, t, PID(ref, kp=kp, kd=kd), tau_ext=lambda tt: np.interp(tt, t, w), rtol=1e-6, atol=1e-9)
+    sim_s = time.time() - t0
+    log = controller_log(res, fs, rng=np.random.default_rng(2), resolver_bits=18, gear_ratio=100.0, current_noise_sd=0.02)
+    with tempfile.TemporaryDirectory() as d:
+        write_csv_columns(Path(d) / "log.csv", {"time": log.t, "qm_j1": log.q_m[:, 0], "tau_j1": log.tau[:, 0]})
+        s = run_frf(Path(d) / "log.csv", Path(d) / "out", input="tau_j1", output="qm_j1")
+    truth = two_inertia_modes(**p)
+    k = s["model"]["params"]["k"]
+    fa, fr = s["modes"]
+    print(f"| assist_j2 | {100 * (k['value'] / p['k'] - 1):+.2f} | {100 * k['std'] / k['value']:.2f} | "
+          f"{100 * (fa['f_hz'] / truth[0][1] - 1):+.2f} | {100 * (fr['f_hz'] / truth[1][1] - 1):+.2f} | "
+          f"{s['frf']['n_periods']} | {sim_s:.0f} |")
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--quick", action="store_true", help="fewer seeds")
+    ap.add_argument("--no-assist", action="store_true", help="skip the (slow) simulations with mocapfj.dynamics")
+    args = ap.parse_args()
+    seeds = range(4) if args.quick else range(12)
+    t0 = time.time()
+    grid(list(seeds))
+    h1_bias(list(seeds)[:4])
+    calibration(list(seeds) if not args.quick else range(6))
+    if not args.no_assist:
+        assist()
+        motor_only()
+    print(f"\n(total {time.time() - t0:.0f} s)")
+
+
+if __name__ == "__main__":
+    main()
