@@ -436,10 +436,10 @@ def _cmd_frf(args) -> int:
                  f"{f['estimator']} estimator, {f['n_realisations']} realisation(s) x {f['n_periods']} periods of "
                  f"{s['period_s']:.6g} s, coherence min {min(f['coherence']):.3f}"]
         d = f["distortion"]
-        lines.append("  distortion at the detection lines: " + ", ".join(
-            f"{k} {d[k]['db']:.1f} dB" + (" (above the noise)" if d[k]["detected"] else "")
-            for k in ("even", "odd") if d[k]["db"] is not None) + (f", noise {d['noise_db']:.1f} dB"
-                                                                 if d["noise_db"] is not None else " none in the band"))
+        parts = [f"{k} {d[k]['db']:.1f} dB" + (" (above the noise)" if d[k]["detected"] else "")
+                 for k in ("even", "odd") if d[k]["db"] is not None]
+        lines.append("  distortion at the detection lines: " + (", ".join(parts) + f", noise {d['noise_db']:.1f} dB"
+                                                               if parts else "no unexcited line in the band"))
         if s["model"]:
             m = s["model"]
             lines.append(f"  {m['name']}: " + ", ".join(f"{n} {p['value']:.4g} +- {p['std']:.2g}" for n, p in m["params"].items())
