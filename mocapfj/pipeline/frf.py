@@ -63,8 +63,8 @@ def read_frf_columns(path, names: dict, time: str | None) -> tuple[Path, dict, n
 def find_period(x, *, exact: bool) -> int | None:
     """Smallest lag L >= 8 samples at which x repeats: the normalised mismatch
     mean (x[n + L] - x[n])^2 / (2 var x) over the record after its first fifth (the transient) is
-    below 1e-8 (`exact`, a reference written to full precision) or below 2 m* + 0.02 with m* the
-    smallest mismatch over the lags (a noisy input); None when nothing repeats (m* > 0.3)."""
+    below 1e-8 (`exact`, a reference), else below 2 m* + 0.02 with m* the smallest mismatch over
+    the lags (a noisy input); None when nothing repeats (m* > 0.3)."""
     x = np.asarray(x, dtype=np.float64)
     x = x[x.size // 5:] - x[x.size // 5:].mean()
     n = x.size
@@ -75,12 +75,14 @@ def find_period(x, *, exact: bool) -> int | None:
     c2 = np.concatenate([[0.0], np.cumsum(x * x)])
     L = np.arange(8, n - n // 4 + 1)                   # an overlap of a quarter of the record at least
     m = (c2[n - L] + (c2[n] - c2[L]) - 2 * ac[L]) / np.maximum(n - L, 1) / (2 * x.var())
-    if exact:
-        hit = np.flatnonzero(m < 1e-8)
-    else:
+    hit = np.flatnonzero(m < 1e-8) if exact else np.empty(0, int)
+    if not hit.size:                                   # noisy, or a reference whose ramp outlasts the first fifth
         if m.min() > 0.3:
             return None
         hit = np.flatnonzero(m < 2 * m.min() + 0.02)
+        if hit.size:                                   # the best lag of the first run of near-minimal lags
+            run = hit[: int(np.argmax(np.diff(np.r_[hit, hit[-1] + 2]) > 1)) + 1]
+            return int(L[run[np.argmin(m[run])]])
     return int(L[hit[0]]) if hit.size else None
 
 

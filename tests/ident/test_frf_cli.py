@@ -108,3 +108,16 @@ def test_bad_input_one_line_exit_2(record, capsys, tmp_path):
         assert code == 2, (path, err)
         assert len(err.strip().splitlines()) == 1 and needle in err, err
         assert not (tmp_path / "out").exists()
+
+
+def test_period_found_from_a_noisy_input_or_a_ramped_reference():
+    from mocapfj.pipeline.frf import find_period
+
+    ms = design_multisine(200.0, 1024, 0.5, 20.0, seed=3)
+    t, x = ms.signal(5)
+    rng = np.random.default_rng(0)
+    assert find_period(x, exact=True) == 1024
+    assert find_period(np.clip(t / 8.0, 0, 1) * x, exact=True) == 1024        # ramp longer than the first fifth
+    for a in (0.1, 0.3, 0.6):
+        assert find_period(x + rng.normal(0, a * x.std(), x.size), exact=False) == 1024
+    assert find_period(rng.normal(size=5000), exact=False) is None
