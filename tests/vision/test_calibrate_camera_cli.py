@@ -51,14 +51,14 @@ def data(tmp_path_factory):
             "parallel": _render(root / "parallel", (0.0, 0.4), 4, 2)}
 
 
-def test_calibrates_and_writes_the_camera(data, tmp_path):
+def test_calibrates_and_writes_the_camera(data, tmp_path, capsys):
     root = data["root"]
     out = tmp_path / "out"
-    r = subprocess.run([sys.executable, "-m", "mocapfj.cli", "calibrate-camera", *map(str, data["tilted"]),
-                        str(root / "blank.png"), "--board", str(root / "board.toml"), "--out", str(out), "--json"],
-                       capture_output=True, text=True)
-    assert r.returncode == 0, r.stderr
-    s = json.loads(r.stdout)
+    code = main(["calibrate-camera", *map(str, data["tilted"]), str(root / "blank.png"), "--board",
+                 str(root / "board.toml"), "--out", str(out), "--json"])
+    stdout, stderr = capsys.readouterr()
+    assert code == 0, stderr
+    s = json.loads(stdout)
     for key in ("fx", "fy", "cx", "cy", "dist", "rms_px", "n_views_used", "n_views", "std", "views"):
         assert key in s
     assert s["n_views"] == 8 and s["n_views_used"] == 7 and len(s["dist"]) == 5

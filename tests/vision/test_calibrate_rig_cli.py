@@ -20,9 +20,19 @@ ROOT = Path(__file__).resolve().parents[2]
 WAND_FILE = ROOT / "calibration" / "wands" / "wand_3marker_500mm.toml"
 
 
-def run(*args):
-    return subprocess.run([sys.executable, "-m", "mocapfj.cli", "calibrate-rig", *map(str, args)],
-                          capture_output=True, text=True, cwd=ROOT)
+def run(*args, capsys=None):
+    """calibrate-rig as a subprocess, or in this process when `capsys` is given (no interpreter and
+    import start-up per call)."""
+    if capsys is None:
+        return subprocess.run([sys.executable, "-m", "mocapfj.cli", "calibrate-rig", *map(str, args)],
+                              capture_output=True, text=True, cwd=ROOT)
+    from types import SimpleNamespace
+
+    from mocapfj.cli import main
+
+    code = main(["calibrate-rig", *map(str, args)])
+    out, err = capsys.readouterr()
+    return SimpleNamespace(returncode=code, stdout=out, stderr=err)
 
 
 @pytest.fixture(scope="module")
@@ -38,11 +48,11 @@ def wand_files(tmp_path_factory):
     return d, rig
 
 
-def test_wand_wave_to_rig_file_and_json(wand_files, tmp_path):
+def test_wand_wave_to_rig_file_and_json(wand_files, tmp_path, capsys):
     d, rig = wand_files
     out = tmp_path / "out"
     r = run("--wand", WAND_FILE, "--detections", d / "blobs.csv", "--lframe", d / "lframe.csv",
-            "--intrinsics", d / "intrinsics.toml", "--out", out, "--json")
+            "--intrinsics", d / "intrinsics.toml", "--out", out, "--json", capsys=capsys)
     assert r.returncode == 0, r.stderr
     s = json.loads(r.stdout)
     assert s["method"] == "wand" and s["world"] == "lframe" and s["wand_length_sd_mm"] < 0.8
@@ -59,7 +69,7 @@ def test_wand_wave_to_rig_file_and_json(wand_files, tmp_path):
     assert P.shape == (len(full["parameter_names"]),) * 2 and np.allclose(P, P.T)
 
 
-def test_board_videos_of_caliscopes_four_webcams(realdata, tmp_path):
+def test_board_videos_of_caliscopes_four_webcams(realdata, tmp_path, capsys):
     """caliscope's four webcams (its mp4 files, every 4th frame; the inverted 4 x 5 ChArUco) with
     caliscope's intrinsics as the intrinsics source: every camera centre, in camera 0's frame,
     within 2 cm of caliscope's post-optimisation rig (D. Prible, github.com/mprib/caliscope, BSD-2).
@@ -76,7 +86,7 @@ def test_board_videos_of_caliscopes_four_webcams(realdata, tmp_path):
     for v in videos:
         args += ["--camera", v]
     r = run(*args, "--intrinsics", tmp_path / "intrinsics.toml", "--refine-intrinsics", "fixed", "--every", "4",
-            "--out", tmp_path / "rig", "--json")
+            "--out", tmp_path / "rig", "--json", capsys=capsys)
     assert r.returncode == 0, r.stderr
     s = json.loads(r.stdout)
     assert s["method"] == "board" and s["refined_intrinsics"] == [] and s["rms_px"] < 1.0
@@ -92,7 +102,8 @@ def test_board_videos_of_caliscopes_four_webcams(realdata, tmp_path):
     assert (tmp_path / "rig" / "detections.csv").is_file()
 
 
-def test_bad_input_exits_2_with_one_line_and_writes_nothing(wand_files, tmp_path):
+def test_bad_input_exits_2_with_one_line_and_writes_nothing(wand_files, tmp_path, capsys):
+    """The first case as a subprocess (the exit code a shell sees), the others in this process."""
     d, _ = wand_files
     text = (d / "blobs.csv").read_text().splitlines()
     head, first = text[0], text[1].split(",")
@@ -109,9 +120,9 @@ def test_bad_input_exits_2_with_one_line_and_writes_nothing(wand_files, tmp_path
         (("--wand", WAND_FILE, "--board", ROOT / "calibration" / "boards" / "chessboard_9x6_30mm.toml"),
          r"--board/--wand: expected exactly one of --board"),
     ]
-    for args, pattern in cases:
+    for i, (args, pattern) in enumerate(cases):
         out = tmp_path / "never"
-        r = run(*args, "--out", out)
+        r = run(*args, "--out", out, capsys=capsys if i else None)
         assert r.returncode == 2, (args, r.stderr)
         lines = r.stderr.strip().splitlines()
         assert len(lines) == 1 and lines[0].startswith("mocapfj: error: "), r.stderr
@@ -121,10 +132,10 @@ def test_bad_input_exits_2_with_one_line_and_writes_nothing(wand_files, tmp_path
         assert not out.exists()
 
 
-def test_one_board_view_per_camera_is_refused(realdata, tmp_path):
+def test_one_board_view_per_camera_is_refused(realdata, tmp_path, capsys):
     images = realdata / "bouguet_stereo" / "images"
     r = run("--board", ROOT / "calibration" / "boards" / "chessboard_9x6_30mm.toml", "--camera", images / "left01.jpg",
-            "--camera", images / "right01.jpg", "--out", tmp_path / "one")
+            "--camera", images / "right01.jpg", "--out", tmp_path / "one", capsys=capsys)
     assert r.returncode == 2
     assert "camera 0 (cam_0): expected at least 3 board views to estimate its intrinsics, got 1 view" in r.stderr
     assert not (tmp_path / "one").exists()
