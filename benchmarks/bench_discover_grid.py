@@ -210,7 +210,7 @@ def _models(truth: dict, case, delay_s: float):
 
 def run_case(args) -> dict:
     """Generate (cached) and run one case of one kind."""
-    case, kind, root, s, sign = args
+    case, kind, root, s, sign, reuse = args
     import mocapfj
     from mocapfj.discover import write_model_file
     from mocapfj.discover.model import simulate_joint
@@ -233,8 +233,15 @@ def run_case(args) -> dict:
         mfile = base / f"{kind}_nominal.toml"
         write_model_file(mfile, [nominal])
         tic = time.perf_counter()
-        r = run_discover(ident, base / f"{kind}_out", model=mfile, validation=valid)
-        out["seconds"] = time.perf_counter() - tic
+        done = base / f"{kind}_out" / "discovery.json"
+        if reuse and done.exists():                  # a discovery an interrupted run finished
+            from mocapfj.io import read_json
+
+            r = read_json(done)
+            out["seconds"] = float("nan")
+        else:
+            r = run_discover(ident, base / f"{kind}_out", model=mfile, validation=valid)
+            out["seconds"] = time.perf_counter() - tic
         sv = mocapfj.signals(valid)["j1"]
         band = r["validation"]["fits"]["j1"]["before"]["band_hz"]            # the nominal model's band
         tv = simulate_joint(true, sv.t, sv.q, sv.q_m, sv.u, band_hz=band).summary()
@@ -324,6 +331,8 @@ def main(argv=None) -> int:
     ap.add_argument("--base-seed", type=int, default=14000)
     ap.add_argument("--kinds", default=",".join(KINDS))
     ap.add_argument("--jobs", type=int, default=2)
+    ap.add_argument("--reuse", action="store_true",
+                    help="take the discovery.json an earlier (interrupted) run left for a case and kind")
     ap.add_argument("--cache", type=Path, default=ROOT / "benchmarks" / ".cache" / "discover_grid")
     args = ap.parse_args(argv)
 
@@ -336,7 +345,7 @@ def main(argv=None) -> int:
     for i, c in enumerate(cases):
         for k in kinds:        # a kind's size depends on (seed, case, kind) alone
             rng = np.random.default_rng(np.random.SeedSequence([args.base_seed, i, KINDS.index(k)]))
-            jobs.append((c, k, root, float(rng.uniform(0.3, 0.8)), float(rng.choice([-1.0, 1.0]))))
+            jobs.append((c, k, root, float(rng.uniform(0.3, 0.8)), float(rng.choice([-1.0, 1.0])), args.reuse))
     tic = time.perf_counter()
     # one worker per case's kinds in order: the control bundle is written before the others use it
     with ProcessPoolExecutor(args.jobs) as ex:
