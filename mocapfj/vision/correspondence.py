@@ -285,9 +285,9 @@ def _epipolar_edges(rig, pool: _Pool, a: int, b: int, eps_px: float):
     return ia[:n], ib[:n]
 
 
-def _two_view_points(rig, params, pool, a, b, ia, ib):
-    """Points of the pairs (linear, two views), in front of both cameras: (X, ok)."""
-    G = dlt_feature_matrix(rig).reshape(len(rig.cameras), 4, 9)
+def _two_view_points(rig, G, pool, a, b, ia, ib):
+    """Points of the pairs (linear, two views; G the rig's :func:`dlt_feature_matrix` as (C, 4, 9)),
+    in front of both cameras: (X, ok)."""
     m = np.zeros((ia.size, 9))
     for c, idx in ((a, ia), (b, ib)):
         x, y = pool.nrm[c][idx, 0], pool.nrm[c][idx, 1]
@@ -380,6 +380,7 @@ def match_detections(rig: Rig, det: Detections, *, sigma_px: float | None = None
              "conflicts_lost": 0}
     pairs = _pair_order(rig)
     support = _kernels()[1]
+    G = dlt_feature_matrix(rig).reshape(C, 4, 9)
     rv, tv, intr, extra = params
     R = np.ascontiguousarray(rotation_jacobian(rv)[0])
     d14 = np.ascontiguousarray(np.concatenate([intr[:, 4:9], extra], axis=1))
@@ -390,7 +391,7 @@ def match_detections(rig: Rig, det: Detections, *, sigma_px: float | None = None
             ia, ib = _epipolar_edges(rig, pool, a, b, eps)
             if not ia.size:
                 continue
-            X, ok = _two_view_points(rig, params, pool, a, b, ia, ib)
+            X, ok = _two_view_points(rig, G, pool, a, b, ia, ib)
             ia, ib, X = ia[ok], ib[ok], X[ok]
             fr = pool.frame[a][ia]
             fi = pool.fidx[a][ia]
@@ -421,7 +422,7 @@ def match_detections(rig: Rig, det: Detections, *, sigma_px: float | None = None
         for a, b in pairs:
             ia, ib = _epipolar_edges(rig, pool, a, b, eps)
             if ia.size:
-                X, ok = _two_view_points(rig, params, pool, a, b, ia, ib)
+                X, ok = _two_view_points(rig, G, pool, a, b, ia, ib)
                 edges.append((a, b, ia[ok], ib[ok]))
         if edges:
             ga = np.concatenate([offsets[a] + ia for a, b, ia, ib in edges])

@@ -97,8 +97,8 @@ class UndistortionTable:
     xn, yn : (ny, nx) float
         Normalised coordinates (X/Z, Y/Z) at the nodes; NaN where the distortion cannot be inverted.
     max_error_px : float
-        Largest error found on a 4 x 4 sampling of every cell (its centre included, the worst
-        place of a bilinear interpolant), converted to pixels with the focal length.
+        Largest error found at the cells' centres and edge midpoints (the worst places of a
+        bilinear interpolant), converted to pixels with the focal length.
     coef : (5,) float
         The approximate inverse's c1, c2, c3, q1, q2 (:func:`_approximate_inverse`).
     """
@@ -150,9 +150,11 @@ def undistortion_table(camera: Camera, *, tol_px: float = 1e-3, step_px: float =
                        min_step_px: float = 1.0) -> UndistortionTable:
     """The undistortion table of `camera`, its grid refined until its error is below `tol_px`.
 
-    The grid spans the image and two cells beyond it; its step starts at `step_px` and is halved
-    (not below `min_step_px`; as many times as the error's scaling with step^2 predicts) while the
-    error on a 4 x 4 sampling of every cell exceeds `tol_px`.
+    The grid spans the image and a margin of two cells (at most 16 px) beyond it; its step starts
+    at `step_px` and is halved (not below `min_step_px`; once or twice, as the error's scaling with
+    step^2 predicts) while the error at the cells' centres and edge midpoints exceeds `tol_px` and
+    shrinks with the step (it does not where the distortion folds over inside the grid). The error
+    found is recorded either way.
     Tables depend on the intrinsics only (size, K, distortion) and are cached by them.
     """
     key = (camera.size, camera.K.tobytes(), camera.dist.tobytes(), float(tol_px), float(step_px), float(min_step_px))
@@ -164,10 +166,14 @@ def undistortion_table(camera: Camera, *, tol_px: float = 1e-3, step_px: float =
     f = float(min(K[0, 0], K[1, 1]))
     step = float(step_px)
     coef = None
-    sub = (np.arange(4) + 0.5) / 4                      # 4 x 4 samples per cell, the centre among them
+    prev = math.inf
+    # where a bilinear interpolant errs most: the cells' centres (curvatures of one sign) and the
+    # midpoints of their edges (of opposite signs)
+    sub = np.array([[0.5, 0.5], [0.5, 0.0], [0.0, 0.5]])
     while True:
-        gx = np.arange(-0.5 - 2 * step, w + 2 * step, step)
-        gy = np.arange(-0.5 - 2 * step, h + 2 * step, step)
+        m = min(2 * step, 16.0)                        # the grid's margin beyond the image, px
+        gx = -0.5 - m + step * np.arange(math.ceil((w + 2 * m) / step) + 1)
+        gy = -0.5 - m + step * np.arange(math.ceil((h + 2 * m) / step) + 1)
         X, Y = np.meshgrid(gx, gy)
         n = normalized_from_pixels(camera, np.stack([X, Y], axis=-1))
         if coef is None:                                # fitted once, over the image
@@ -176,14 +182,15 @@ def undistortion_table(camera: Camera, *, tol_px: float = 1e-3, step_px: float =
                                 n[..., 0][inside], n[..., 1][inside])
         table = UndistortionTable(camera, float(gx[0]), float(gy[0]), step, n[..., 0].copy(), n[..., 1].copy(),
                                   math.nan, coef)
-        cx, cy = np.meshgrid((gx[:-1, None] + step * sub[None]).ravel(), (gy[:-1, None] + step * sub[None]).ravel())
-        mid = np.stack([cx.ravel(), cy.ravel()], axis=1)
+        cx, cy = np.meshgrid(gx[:-1], gy[:-1])
+        mid = np.concatenate([np.stack([cx.ravel() + step * a, cy.ravel() + step * b], axis=1) for a, b in sub])
         err = np.abs(table.normalized(mid) - normalized_from_pixels(camera, mid)).max(axis=1) * f
         worst = float(np.nanmax(err, initial=0.0))
-        if worst <= tol_px or step / 2 < min_step_px:
-            break
-        # the bilinear error scales with step^2: halve as often as that predicts (then check again)
-        halvings = max(1, math.ceil(math.log2(math.sqrt(worst / tol_px)))) if math.isfinite(worst) else 1
+        if worst <= tol_px or step / 2 < min_step_px or not worst < 0.7 * prev:
+            break                 # the bound holds, or the grid is at its finest, or the error does
+        prev = worst              # not shrink with the step (no smooth inverse there: a fold)
+        # the bilinear error scales with step^2: halve as often as that predicts, at most twice
+        halvings = min(2, max(1, math.ceil(math.log2(math.sqrt(worst / tol_px))))) if math.isfinite(worst) else 1
         step = max(step / 2**halvings, min_step_px)
     for a in (table.xn, table.yn):
         a.setflags(write=False)

@@ -15,7 +15,7 @@ from mocapfj.synth.render import render_markers
 from mocapfj.synth.robot_mesh import base_pose, forward_kinematics, pa10_geometry
 from mocapfj.types import Detections, MarkerCluster
 from mocapfj.vision.correspondence import match_detections
-from mocapfj.vision.track import cluster_symmetry, fill_gaps, fit_clusters, label_points, link_points
+from mocapfj.vision.track import cluster_symmetry, fill_gaps, fit_clusters, label_points, link_points, rigid_fit
 
 
 def _wrong(xyz, truth, tol=0.01):
@@ -200,3 +200,41 @@ def test_link_points_and_fits():
     assert not filled[10:16].any() and {g["label"] for g in gaps} == {"a1", "a2"}
     with pytest.raises(InputError, match="frames 0..19"):
         label_points(np.array([20]), np.zeros((1, 3)), [a], n_frames=20, rate_hz=100.0)
+
+
+def _kabsch_svd(p, q, w):
+    """Kabsch (1976) by SVD with the reflection correction: the reference for rigid_fit."""
+    pc = (w[..., None] * p).sum(1) / w.sum(1, keepdims=True)
+    qc = (w[..., None] * np.nan_to_num(q)).sum(1) / w.sum(1, keepdims=True)
+    H = np.einsum("nk,nki,nkj->nij", w, p - pc[:, None], np.nan_to_num(q) - qc[:, None])
+    U, _, Vt = np.linalg.svd(H)
+    d = np.sign(np.linalg.det(np.swapaxes(Vt, 1, 2) @ np.swapaxes(U, 1, 2)))
+    D = np.zeros_like(H)
+    D[:, 0, 0] = D[:, 1, 1] = 1.0
+    D[:, 2, 2] = d
+    R = np.swapaxes(Vt, 1, 2) @ D @ np.swapaxes(U, 1, 2)
+    return R, qc - np.einsum("nij,nj->ni", R, pc)
+
+
+def test_rigid_fit_is_kabsch():
+    """Horn's quaternion gives Kabsch's (reflection-corrected SVD) fit: noise-free poses exactly,
+    noisy ones, three markers (a plane), a point set mirrored by noise, absent markers ignored."""
+    rng = np.random.default_rng(8)
+    n, K = 2000, 5
+    tpl = rng.normal(0, 0.05, (K, 3))
+    R_true = np.stack([matrix_from_rotvec(v) for v in rng.normal(0, 1.5, (n, 3))])
+    q = np.einsum("nij,kj->nki", R_true, tpl) + rng.normal(0, 1, (n, 1, 3))
+    w = np.ones((n, K))
+    w[: n // 2, 3:] = 0.0                             # three markers only
+    q[w == 0] = np.nan
+    p = np.broadcast_to(tpl, (n, K, 3))
+    R, t = rigid_fit(p, q, w)
+    assert np.abs(R - R_true).max() < 1e-12
+    assert np.abs(np.linalg.det(R) - 1).max() < 1e-12
+    noisy = q + rng.normal(0, 0.01, q.shape)          # 1 cm on 5 cm: some fits want a reflection
+    R1, t1 = rigid_fit(p, noisy, w)
+    R2, t2 = _kabsch_svd(p, noisy, w)
+    assert np.abs(R1 - R2).max() < 1e-9 and np.abs(t1 - t2).max() < 1e-10
+    assert np.abs(np.linalg.det(R1) - 1).max() < 1e-12
+    R0, t0 = rigid_fit(p[:1], q[:1], np.zeros((1, K)))
+    assert np.isnan(t0).all()

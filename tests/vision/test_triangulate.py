@@ -14,7 +14,7 @@ from mocapfj.synth.markers import place_markers
 from mocapfj.synth.render import render_markers
 from mocapfj.synth.robot_mesh import base_pose, forward_kinematics, pa10_geometry
 from mocapfj.types import Rig
-from mocapfj.vision.camera import project_points, project_rig
+from mocapfj.vision.camera import look_at_camera, project_points, project_rig
 from mocapfj.vision.projection import normalized_from_pixels
 from mocapfj.vision.triangulate import (observation_array, triangulate, triangulate_linear, undistortion_table)
 
@@ -41,6 +41,40 @@ def test_undistortion_table_within_its_bound(rig):
     far = np.array([[-300.0, 20.0], [np.nan, 3.0]])
     out = tab.normalized(far)
     assert np.allclose(out[0], normalized_from_pixels(cam, far[:1])[0]) and np.isnan(out[1]).all()
+
+
+@pytest.mark.parametrize("dist", [(-0.3, 0.1, 0.002, -0.0015, 0.0), (0.2, -0.05, 0.0, 0.0, 0.0, 0.05, 0.0, 0.0),
+                                  (-0.1, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.003, 0.0, -0.002, 0.0)])
+def test_undistortion_table_bound_holds_for_strong_and_rational_distortion(dist):
+    """The fitted approximate inverse plus the residual table keeps its bound where the
+    approximation is poor: strong barrel (image corners at 0.8 of their undistorted radius) with
+    tangential terms, a rational model (k4), thin prism."""
+    cam = look_at_camera("c", (2.0, 0.0, 1.0), (0.0, 0.0, 1.0), fx=900.0, size=(1280, 1024), dist=dist)
+    tab = undistortion_table(cam)
+    assert tab.max_error_px <= 1e-3
+    rng = np.random.default_rng(4)
+    xy = rng.uniform([-0.5, -0.5], [cam.size[0] - 0.5, cam.size[1] - 0.5], (50000, 2))
+    exact = normalized_from_pixels(cam, xy)
+    err = np.abs(tab.normalized(xy) - exact).max(axis=1) * cam.K[0, 0]
+    assert np.nanmax(err) <= 1.05 * tab.max_error_px
+    assert np.array_equal(np.isnan(tab.normalized(xy)), np.isnan(exact))
+
+
+def test_linear_step_beyond_the_tables_is_exact(rig):
+    """Views far outside the image (beyond the undistortion tables) are undistorted exactly."""
+    rng = np.random.default_rng(6)
+    p = _points(rng, 500)
+    p[:50] *= [4.0, 4.0, 1.0]                          # far off-centre: outside some images
+    xy, front = project_rig(rig, p)
+    xy[~front] = np.nan
+    outside = np.zeros(xy.shape[:2], bool)
+    for c, cam in enumerate(rig.cameras):
+        w, h = cam.size
+        outside[c] = (xy[c, :, 0] < -100) | (xy[c, :, 0] > w + 100) | (xy[c, :, 1] < -100) | (xy[c, :, 1] > h + 100)
+    assert outside[:, :50].any()
+    lin, nv = triangulate_linear(rig, xy)
+    ok = nv >= 2
+    assert np.abs(lin[ok] - p[ok]).max() < 2e-5
 
 
 def test_noise_free_points_are_exact_from_any_camera_subset(rig):
