@@ -18,11 +18,15 @@ frame's markers rendered through its cameras with occlusion by the arm's links
 one spurious blob per camera and frame added on average.
 
 Columns: wall time, points/s, 3D RMS error against the truth (mm) and the ratio of the times
-measured in the same run. aniposelib's ``triangulate`` undistorts with OpenCV and solves each point's
+measured in the same run; for the scenarios also the process's CPU time (on a machine shared with
+other jobs the wall time is the CPU time stretched by the load) and the load average. aniposelib's ``triangulate`` undistorts with OpenCV and solves each point's
 DLT by SVD under JAX (x64); ``triangulate_ransac`` tries camera subsets per point in Python.
-mocapfj's linear step: undistortion tables (bounded at 1e-3 px) and the DLT normal equations as
-one matrix product; "refined" adds Gauss-Newton and the covariance; "robust" adds the vectorised
-MSAC over camera pairs.
+mocapfj's linear step: the undistortion (approximate inverse plus residual table, bounded at
+1e-3 px), the DLT normal equations and their solve in one compiled pass per point (numba; the
+first run after installation compiles the kernels into numba's on-disk cache, later runs load
+them); the "normalised coordinates" row is the linear algebra alone in numpy (one matrix product
+(N, 4C) x (4C, 9)) from coordinates undistorted beforehand; "refined" adds Gauss-Newton and the
+covariance; "robust" adds the vectorised MSAC over camera pairs.
 
 Run: ``.venv/bin/python benchmarks/bench_triangulate.py [--quick] [--duration S]`` (aniposelib and jax
 are optional bench dependencies: ``pip install --no-deps aniposelib toml``; skipped when absent).
@@ -205,24 +209,24 @@ def score_labelling(lab, rend, keep, layout, n):
 
 
 def scenario_table(duration: float, names):
-    print("\n| scenario | frames | detections | spurious | correspondence (s) | labelling (s) | labelled samples | "
-          "wrong labels | found of seen by >= 2 cameras | NaN share | gaps filled | long gaps |")
-    print("|---|---|---|---|---|---|---|---|---|---|---|---|")
+    print("\n| scenario | frames | detections | spurious | correspondence (s) | labelling (s) | CPU s (corr. + lab.) | "
+          "labelled samples | wrong labels | found of seen by >= 2 cameras | NaN share | gaps filled | long gaps | load |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
     for name in names:
         rig, det, clusters, rend, keep, layout, n, rate, sigma = build_scenario(name, duration)
         n_spurious = det.frame.size - int(keep.sum())
-        tic = time.perf_counter()
+        tic, cpu = time.perf_counter(), time.process_time()
         cand = match_detections(rig, det, sigma_px=sigma)
-        t_corr = time.perf_counter() - tic
+        t_corr, c_corr = time.perf_counter() - tic, time.process_time() - cpu
         ok = np.isfinite(cand.p_world[:, 0])
-        tic = time.perf_counter()
+        tic, cpu = time.perf_counter(), time.process_time()
         lab = label_points(cand.frame[ok], cand.p_world[ok], clusters, n_frames=n, rate_hz=rate,
                            residual_m=cand.triangulation.ray_residual_m[ok])
-        t_lab = time.perf_counter() - tic
+        t_lab, c_lab = time.perf_counter() - tic, time.process_time() - cpu
         n_have, n_wrong, found, nan_share = score_labelling(lab, rend, keep, layout, n)
-        print(f"| {name} | {n} | {det.frame.size} | {n_spurious} | {t_corr:.2f} | {t_lab:.2f} | {n_have} | "
-              f"{n_wrong} | {100 * found:.2f} % | {100 * nan_share:.2f} % | "
-              f"{lab.stats['gaps_filled']} | {lab.stats['n_long_gaps']} |")
+        print(f"| {name} | {n} | {det.frame.size} | {n_spurious} | {t_corr:.2f} | {t_lab:.2f} | "
+              f"{c_corr:.2f} + {c_lab:.2f} | {n_have} | {n_wrong} | {100 * found:.2f} % | {100 * nan_share:.2f} % | "
+              f"{lab.stats['gaps_filled']} | {lab.stats['n_long_gaps']} | {os.getloadavg()[0]:.1f} |")
 
 
 def main():
