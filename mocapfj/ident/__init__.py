@@ -17,6 +17,8 @@ spring models, friction, excitation design, n-link and rigid robots.
 - :mod:`.algebraic`, :mod:`.decrement`, :mod:`.precompensation`: omega0 and zeta from a fraction of
   a period, the logarithmic decrement, model-based pre-compensation (Oueslati et al. 2012); :mod:`.clamped`:
   stiffness with the end-effector clamped (Jubien, Abba and Gautier 2014). Imported on first use.
+- :mod:`.multisine`, :mod:`.frf`, :mod:`.frf_fit`: multisine excitation, the FRF from periodic data
+  and the two-inertia joint fitted to it (Makarov et al. 2012). Imported on first use.
 
 See docs/architecture.md for what this package owns and may import.
 """
@@ -45,7 +47,10 @@ _LAZY = {"base_from_standard": "regressor", "base_parameters": "regressor", "loa
          "identify_rigid": "rigid", "identify_rigid_log": "rigid", "RIGID_FRICTION_MODELS": "rigid",
          "algebraic_estimate": "algebraic", "algebraic_sliding": "algebraic", "log_decrement": "decrement",
          "SecondOrderEstimate": "algebraic", "precompensate": "precompensation", "identify_clamped": "clamped",
-         "fit_clamped": "clamped", "mdh_model": "clamped", "ClampedStiffness": "clamped"}
+         "fit_clamped": "clamped", "mdh_model": "clamped", "ClampedStiffness": "clamped",
+         "Multisine": "multisine", "design_multisine": "multisine", "multisine_realisations": "multisine",
+         "write_multisine_reference": "multisine", "FRF": "frf", "estimate_frf": "frf", "FRFFit": "frf_fit",
+         "fit_two_inertia": "frf_fit", "two_inertia_frf": "frf_fit", "two_inertia_modes": "frf_fit"}
 
 __all__ = [
     "identify_joint", "identify_signals", "IDENTIFY_METHODS", "spring_pairs",
