@@ -131,7 +131,8 @@ class FRF:
     def to_dict(self) -> dict:
         return {"estimator": self.estimator, "closed_loop": self.closed_loop, "n_periods": self.n_periods,
                 "n_realisations": self.n_realisations, "fs_hz": self.fs_hz, "period_samples": self.n_samples,
-                "frequencies_hz": self.f_hz, "magnitude": self.magnitude, "phase_rad": self.phase_rad,
+                "frequencies_hz": self.f_hz, "frequencies": self.f_hz, "magnitude": self.magnitude,
+                "phase_rad": self.phase_rad, "phase": self.phase_rad,
                 "real": self.G.real, "imag": self.G.imag, "coherence": self.coherence, "noise": self.std,
                 "noise_total": None if self.var_total is None else np.sqrt(self.var_total),
                 "distortion": self.distortion.to_dict()}
