@@ -487,7 +487,11 @@ def triangulate_linear(rig: Rig, xy_px, *, weights=None, workers: int | None = N
     n_views = np.zeros(n, np.int64)
     outside = np.zeros(n, bool)
     use_w = weights is not None
-    wts = np.broadcast_to(np.asarray(weights, dtype=np.float64), (C, n)) if use_w else np.zeros((C, 1))
+    wts = np.zeros((C, 1))
+    if use_w:                         # a writable (C, n) array: the kernel's one compiled signature
+        wts = np.asarray(weights, dtype=np.float64)
+        if wts.shape != (C, n) or not wts.flags.writeable:
+            wts = np.broadcast_to(wts, (C, n)).copy()
     kernel = _linear_kernel()
 
     def chunk(s):
