@@ -24,7 +24,8 @@ matching-and-verification scheme of commercial systems):
 6. The accepted blob sets are triangulated with :func:`mocapfj.vision.triangulate.triangulate`
    (Gauss-Newton, robust views, covariance).
 
-Everything runs over all frames at once; Python loops run over camera pairs and rounds only.
+Everything runs over all frames at once; Python loops run over camera pairs and rounds only, the
+frame-by-frame pairing and support search are compiled (numba, imported on first use).
 Conventions: docs/conventions.md.
 """
 

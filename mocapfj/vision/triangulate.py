@@ -2,21 +2,26 @@
 
 Every function takes the observations of N points in C cameras as one array ``xy_px`` (C, N, 2)
 (pixels, OpenCV convention, docs/conventions.md), NaN where a camera did not see a point, so that
-any subset of cameras can see any point and no Python loop runs over points.
+any subset of cameras can see any point and no Python loop runs over points (the per-point
+passes are compiled).
 
-1. **Undistortion** by a table per camera (:class:`UndistortionTable`): the undistorted normalised
-   coordinates of a grid of pixels (Newton's method, :func:`mocapfj.vision.projection.normalized_from_pixels`)
-   interpolated bilinearly. The grid is refined until the interpolation error at the cell centres,
-   where it is largest, is below ``tol_px`` (1e-3 px by default), and that bound is recorded.
+1. **Undistortion** by a table per camera (:class:`UndistortionTable`): a fitted approximate
+   inverse of the distortion (radial and tangential terms, least squares) plus a bilinearly
+   interpolated grid of what it leaves against the exact inverse (Newton's method,
+   :func:`mocapfj.vision.projection.normalized_from_pixels`). The grid is refined until the error
+   at the cells' centres and edge midpoints, where a bilinear interpolant errs most, is below
+   ``tol_px`` (1e-3 px by default), and that bound is recorded.
 2. **Linear triangulation** (:func:`triangulate_linear`): the DLT's equations
    ``(x P3 - P1) X~ = 0``, ``(y P3 - P2) X~ = 0`` for each view (Hartley and Zisserman 2003, §12.2),
    with X~ = (X, 1) (their inhomogeneous variant). The normal matrix of a point is
    ``sum_c (x^2 + y^2) P3 P3^T - x (P3 P1^T + P1 P3^T) - y (P3 P2^T + P2 P3^T) + P1 P1^T + P2 P2^T``,
-   linear in the features (x^2 + y^2, x, y, 1) of each view: one matrix product (N, 4C) x (4C, 9)
-   gives every point's 3 x 3 system, solved in closed form.
+   linear in the features (x^2 + y^2, x, y, 1) of each view with fixed 4 x 9 blocks per camera
+   (:func:`dlt_feature_matrix`), solved in closed form. Undistortion, sum and solve run in one
+   compiled pass per point (numba, imported on first use as in :mod:`mocapfj.dynamics`).
 3. **Gauss-Newton** on the reprojection error in pixels (:func:`triangulate`), with the analytic
    point Jacobian of the camera model of :mod:`mocapfj.vision.projection` (its distortion and
-   distortion Jacobian, :func:`~mocapfj.vision.projection.distort`); all points at once.
+   distortion Jacobian, :func:`~mocapfj.vision.projection.distort`); all points at once, each
+   step one compiled pass over every point's views.
 4. **Robust camera subsets**: points with a view beyond the gate are triangulated again from every
    pair of their cameras at once (the pairs' normal matrices are sums of the views'), every pair's
    point is projected into every camera, and the pair with the least truncated cost (MSAC; Torr and
