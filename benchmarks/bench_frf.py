@@ -14,6 +14,7 @@
    0.5-12 Hz, 5 realisations, harmonic-mean estimator (Makarov et al. 2012, §5.2); the paper's K1 = 1150 and
    K2 = 220 N m/rad and modes between 4.5 and 8.5 Hz. The inertias are ours (the paper gives none).
 5. A motor-side controller log only (no reference column, no period given) through `mocapfj frf`'s pipeline.
+6. datasets/pa10_joint2.toml unchanged (Coulomb friction, gravity) playing a multisine: the linear fit's limits.
 
     .venv/bin/python benchmarks/bench_frf.py [--quick] [--no-assist]
 """
@@ -204,6 +205,42 @@ def motor_only():
           f"{s['frf']['n_periods']} | {sim_s:.0f} |")
 
 
+def pa10_joint2():
+    """datasets/pa10_joint2.toml as it is (Coulomb friction, gravity about q0 = 0.3 rad, the scenario's PD
+    loop) playing an odd multisine 0.5-20 Hz at 200 Hz, through `mocapfj frf`'s pipeline with the reference."""
+    import tempfile
+
+    from mocapfj.dynamics.simulate import PID, controller_log, simulate
+    from mocapfj.io.csvio import write_csv_columns
+    from mocapfj.pipeline.frf import run_frf
+    from mocapfj.synth.scenario import joint_models, load_scenario, reference_trajectory
+
+    print("\n## 6. PA-10 joint 2 scenario (Coulomb friction 9.28 N m, gravity), multisine reference, 200 Hz\n")
+    print("| k err % | k SD % | anti-resonance err % | resonance err % | odd distortion dB | chi2/dof | sim s |")
+    print("|---|---|---|---|---|---|---|")
+    scn = load_scenario(ROOT / "datasets" / "pa10_joint2.toml")
+    model = list(joint_models(scn).values())[0]
+    fs, N, P = 200.0, 1024, 5
+    ms = design_multisine(fs, N, 0.5, 20.0, rms=0.01, seed=2)
+    ref = reference_trajectory(ms.to_reference(q0_rad=0.3, ramp_s=2.0))
+    t = np.arange(P * N) / fs
+    t0 = time.time()
+    res = simulate(model, t, PID(ref, kp=2.0e4, kd=800.0), rtol=1e-6, atol=1e-9)
+    sim_s = time.time() - t0
+    log = controller_log(res, fs, rng=np.random.default_rng(2), resolver_bits=16, gear_ratio=50.0, current_noise_sd=0.3)
+    with tempfile.TemporaryDirectory() as d:
+        write_csv_columns(Path(d) / "log.csv", {"time": log.t, "qm_j2": log.q_m[:, 0], "tau_j2": log.tau[:, 0],
+                                                "qref": ref(log.t)[0]})
+        s = run_frf(Path(d) / "log.csv", Path(d) / "out", input="tau_j2", output="qm_j2", reference="qref")
+    p = dict(J=model.J, I=model.I, k=model.spring.k, d=model.d, b=model.b, v=model.friction.v)
+    truth = two_inertia_modes(**p)
+    k = s["model"]["params"]["k"]
+    fa, fr = s["modes"]
+    print(f"| {100 * (k['value'] / p['k'] - 1):+.2f} | {100 * k['std'] / k['value']:.2f} | "
+          f"{100 * (fa['f_hz'] / truth[0][1] - 1):+.2f} | {100 * (fr['f_hz'] / truth[1][1] - 1):+.2f} | "
+          f"{s['frf']['distortion']['odd']['db']:.1f} | {s['model']['chi2_red']:.0f} | {sim_s:.0f} |")
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="fewer seeds")
@@ -217,6 +254,7 @@ def main():
     if not args.no_assist:
         assist()
         motor_only()
+        pa10_joint2()
     print(f"\n(total {time.time() - t0:.0f} s)")
 
 
