@@ -423,23 +423,33 @@ def _cmd_clamped(args) -> int:
 
 
 def _cmd_frf(args) -> int:
+    import statistics
+
     from .pipeline.frf import run_frf
 
     s = run_frf(args.recording, _work(args), input=args.input, output=args.output, reference=args.reference,
-                time=args.time, period_s=args.period, model=args.model, transient=args.transient,
-                realisations=args.realisations, estimator=args.estimator)
+                time=args.time, period_s=args.period,
+                model=args.model or ("rational" if args.single_record else "two_inertia"), transient=args.transient,
+                realisations=args.realisations, estimator=args.estimator, single_record=args.single_record,
+                order=args.order)
 
     def human(s):
         f = s["frf"]
         fr = f["frequencies_hz"]
-        lines = [f"FRF {s['output']} / {s['input']} from {s['file']}: {len(fr)} lines {fr[0]:.4g}-{fr[-1]:.4g} Hz, "
-                 f"{f['estimator']} estimator, {f['n_realisations']} realisation(s) x {f['n_periods']} periods of "
-                 f"{s['period_s']:.6g} s, coherence min {min(f['coherence']):.3f}"]
+        if s.get("single_record"):
+            lines = [f"FRF {s['output']} / {s['input']} from {s['file']}: {len(fr)} lines {fr[0]:.4g}-{fr[-1]:.4g} Hz, "
+                     f"one record, local polynomial method ({f['lpm']['dof']} degrees of freedom per line), "
+                     f"coherence median {statistics.median(f['coherence']):.3f}"]
+        else:
+            lines = [f"FRF {s['output']} / {s['input']} from {s['file']}: {len(fr)} lines {fr[0]:.4g}-{fr[-1]:.4g} Hz, "
+                     f"{f['estimator']} estimator, {f['n_realisations']} realisation(s) x {f['n_periods']} periods of "
+                     f"{s['period_s']:.6g} s, coherence min {min(f['coherence']):.3f}"]
         d = f["distortion"]
         parts = [f"{k} {d[k]['db']:.1f} dB" + (" (above the noise)" if d[k]["detected"] else "")
                  for k in ("even", "odd") if d[k]["db"] is not None]
-        lines.append("  distortion at the detection lines: " + (", ".join(parts) + f", noise {d['noise_db']:.1f} dB"
-                                                               if parts else "no unexcited line in the band"))
+        if not s.get("single_record"):
+            lines.append("  distortion at the detection lines: " + (", ".join(parts) + f", noise {d['noise_db']:.1f} dB"
+                                                                   if parts else "no unexcited line in the band"))
         if s["model"]:
             m = s["model"]
             lines.append(f"  {m['name']}: " + ", ".join(f"{n} {p['value']:.4g} +- {p['std']:.2g}" for n, p in m["params"].items())
@@ -637,8 +647,14 @@ def build_parser() -> argparse.ArgumentParser:
     fr.add_argument("--time", default=None, help="time column, s (default: the bundle's, else time)")
     fr.add_argument("--period", type=float, default=None,
                     help="excitation period, s (default: found where the reference, else the input, repeats)")
-    fr.add_argument("--model", default="two_inertia", choices=["two_inertia", "none"],
-                    help="model fitted to the FRF (default two_inertia: J, I, k, d, b, v; none: the FRF only)")
+    fr.add_argument("--model", default=None, choices=["two_inertia", "rational", "none"],
+                    help="model fitted to the FRF (default two_inertia: J, I, k, d, b, v; with --single-record "
+                         "rational: B(s)/A(s) of degrees --order; none: the FRF only)")
+    fr.add_argument("--single-record", action="store_true",
+                    help="one record without repeated periods: FRF by the local polynomial method "
+                         "(Pintelon et al. 2010), open loop")
+    fr.add_argument("--order", type=int, nargs=2, default=None, metavar=("NB", "NA"),
+                    help="degrees of B and A of the rational model (default 4 4)")
     fr.add_argument("--estimator", default="auto", choices=["auto", "h1", "harmonic", "indirect"],
                     help="auto (default): indirect with --reference, else harmonic mean")
     fr.add_argument("--transient", default="auto",

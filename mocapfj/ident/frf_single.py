@@ -177,7 +177,9 @@ class RationalFit:
 
     b, a : coefficients in the scaled s = j w / w_norm, highest power first (a monic)
     cov : covariance of (b, a[1:], [tau w_norm])
-    params : dict name -> Parameter (b_i, a_i of s^i in the scaled s; tau in s) ; modes : tuple of Mode (resonances, anti-resonances)
+    params : dict name -> Parameter (b_i, a_i of s^i in the scaled s; tau in s)
+    modes : tuple of Mode, resonances and anti-resonances up to the top of the fitted band, by frequency
+    beyond_band : tuple of Mode, complex roots above the band (the model's shape there, not modes of the data)
     chi2, dof, G_fit as in :class:`~mocapfj.ident.frf_fit.FRFFit`
     """
 
@@ -191,6 +193,7 @@ class RationalFit:
     chi2: float
     dof: int
     G_fit: np.ndarray
+    beyond_band: tuple = ()
     model: str = "rational"
 
     @property
@@ -201,7 +204,7 @@ class RationalFit:
         return {"name": self.model, "order": [len(self.b) - 1, len(self.a) - 1], "w_norm": self.w_norm,
                 "params": {n: {"value": p.value, "std": p.std} for n, p in self.params.items()},
                 "chi2": self.chi2, "dof": self.dof, "chi2_red": self.chi2_red,
-                "modes": [m.to_dict() for m in self.modes]}
+                "modes": [m.to_dict() for m in self.modes], "beyond_band": [m.to_dict() for m in self.beyond_band]}
 
 
 def _root_modes(c, cov_c, kind, w_norm):
@@ -304,6 +307,8 @@ def fit_rational(frf: FRF, n_b: int, n_a: int, *, delay: bool = False, f_band_hz
     cov_a[1:, 1:] = cov[nb1:nb1 + na, nb1:nb1 + na]
     modes = [*_root_modes(a, cov_a, "resonance", w_norm), *_root_modes(b, cov_b, "antiresonance", w_norm)]
     modes.sort(key=lambda md: md.f_hz)
+    beyond = tuple(m for m in modes if m.f_hz > f.max())          # the model's shape beyond the data, not modes
+    modes = [m for m in modes if m.f_hz <= f.max()]
     std = np.sqrt(np.maximum(np.diag(cov), 0.0))
     names = ([f"b{i}" for i in range(n_b, -1, -1)] + [f"a{i}" for i in range(na - 1, -1, -1)]
              + (["tau"] if delay else []))
@@ -313,4 +318,4 @@ def fit_rational(frf: FRF, n_b: int, n_a: int, *, delay: bool = False, f_band_hz
     params = {nm: Parameter(nm, float(x[i] * scale[i]), float(std[i] * scale[i])) for i, nm in enumerate(names)}
     tau = float(x[-1] / w_norm) if delay else 0.0
     return RationalFit(b=b, a=a, tau=tau, w_norm=w_norm, cov=cov, params=params, modes=tuple(modes), chi2=chi2,
-                       dof=dof_fit, G_fit=rational_frf(frf.f_hz, b, a, w_norm=w_norm, tau=tau))
+                       dof=dof_fit, beyond_band=beyond, G_fit=rational_frf(frf.f_hz, b, a, w_norm=w_norm, tau=tau))

@@ -14,7 +14,7 @@ from ..io.csvio import check_increasing, read_csv_columns, write_csv_columns
 
 __all__ = ["run_frf", "read_frf_columns", "find_period", "FRF_CLI_MODELS"]
 
-FRF_CLI_MODELS = ("two_inertia", "none")
+FRF_CLI_MODELS = ("two_inertia", "rational", "none")
 
 
 def read_frf_columns(path, names: dict, time: str | None) -> tuple[Path, dict, np.ndarray]:
@@ -88,13 +88,17 @@ def find_period(x, *, exact: bool) -> int | None:
 
 def run_frf(path, out, *, input: str, output: str, reference: str | None = None, time: str | None = None,
             period_s: float | None = None, model: str = "two_inertia", transient="auto", realisations: int = 1,
-            estimator: str = "auto") -> dict:
+            estimator: str = "auto", single_record: bool = False, order=None) -> dict:
     """``mocapfj frf``: the FRF of column `output` over column `input` (Makarov et al. 2012, eq. 23-27),
     and the two-inertia model fitted to it with its modes.
 
     The record holds `realisations` equal consecutive parts, each starting with `transient` periods
     that are dropped ("auto": :func:`mocapfj.ident.frf.transient_count`). The period comes from `period_s` or, without it, from where the reference
-    (else the input) repeats. Writes OUT/frf.json (the summary) and OUT/frf.csv (per line: f_hz,
+    (else the input) repeats. `single_record`: the record is one period or not periodic at all, the FRF
+    comes from :func:`mocapfj.ident.frf_single.estimate_frf_lpm` (the noise from the record's own
+    spectrum) and the model is ``"rational"`` (degrees `order` = (n_b, n_a), default (4, 4):
+    :func:`mocapfj.ident.frf_single.fit_rational`) or ``"none"``.
+    Writes OUT/frf.json (the summary) and OUT/frf.csv (per line: f_hz,
     the FRF, magnitude, phase, coherence, noise SD, and the model's FRF).
     """
     from ..ident.frf import estimate_frf
@@ -111,6 +115,9 @@ def run_frf(path, out, *, input: str, output: str, reference: str | None = None,
         raise InputError(None, "transient", "a whole number >= 0 or auto", transient)
     if int(realisations) != realisations or realisations < 1:
         raise InputError(None, "realisations", "a whole number >= 1", realisations)
+    if single_record or model == "rational":
+        return _run_single(path, out, input=input, output=output, reference=reference, time=time, model=model,
+                           order=order, single_record=single_record)
     names = {"--input": input, "--output": output, "--reference": reference}
     csv, cols, t = read_frf_columns(path, names, time)
     fs = (t.size - 1) / float(t[-1] - t[0])
@@ -147,6 +154,48 @@ def run_frf(path, out, *, input: str, output: str, reference: str | None = None,
                "period_s": n / fs, "period_samples": n,
                "transient_periods": T // n - frf.n_periods if T // n >= frf.n_periods else None, "frf": frf.to_dict(),
                "model": None if fit is None else fit.to_dict(),
+               "modes": [] if fit is None else [m.to_dict() for m in fit.modes],
+               "files": {"summary": "frf.json", "frf": "frf.csv"}}
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    write_json(out / "frf.json", summary)
+    table = {"f_hz": frf.f_hz, "G_real": frf.G.real, "G_imag": frf.G.imag, "magnitude": frf.magnitude,
+             "phase_rad": frf.phase_rad, "coherence": frf.coherence, "noise": frf.std}
+    if fit is not None:
+        table.update({"model_real": fit.G_fit.real, "model_imag": fit.G_fit.imag})
+    write_csv_columns(out / "frf.csv", table)
+    return summary
+
+
+def _run_single(path, out, *, input, output, reference, time, model, order, single_record) -> dict:
+    """``mocapfj frf --single-record``: the LPM FRF of one record and the rational model (see run_frf)."""
+    from ..ident.frf_single import estimate_frf_lpm, fit_rational
+
+    if not single_record:
+        raise InputError(None, "model", "rational only with --single-record (a periodic record: two_inertia or none)",
+                         model)
+    if model == "two_inertia":
+        raise InputError(None, "model", "rational or none with --single-record (the two-inertia fit takes the "
+                         "noise of repeated periods)", model, hint="pass --model rational --order NB NA")
+    if reference is not None:
+        raise InputError(None, "reference", "no reference with --single-record (open loop only)", reference)
+    order = (4, 4) if order is None else tuple(order)
+    if len(order) != 2 or any(int(o) != o for o in order) or order[0] < 0 or order[1] < 1:
+        raise InputError(None, "order", "two whole numbers NB >= 0, NA >= 1", order)
+    csv, cols, t = read_frf_columns(path, {"--input": input, "--output": output}, time)
+    fs = (t.size - 1) / float(t[-1] - t[0])
+    try:
+        r = estimate_frf_lpm(cols["--input"], cols["--output"], fs)
+    except InputError as e:
+        col = {"u": input, "y": output}.get(e.field)
+        if e.file == "<argument>" and col is not None:
+            raise InputError(csv, f"column {col!r}", e.expected, e.got, e.hint) from None
+        raise
+    frf = r.frf
+    fit = fit_rational(r, int(order[0]), int(order[1])) if model == "rational" else None
+    summary = {"file": str(csv), "input": input, "output": output, "reference": None, "fs_hz": fs,
+               "period_s": None, "period_samples": None, "single_record": True, "transient_periods": None,
+               "frf": r.to_dict(), "model": None if fit is None else fit.to_dict(),
                "modes": [] if fit is None else [m.to_dict() for m in fit.modes],
                "files": {"summary": "frf.json", "frf": "frf.csv"}}
     out = Path(out)

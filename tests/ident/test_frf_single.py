@@ -127,3 +127,29 @@ def test_rational_frf_round_trip_and_bad_input():
         estimate_frf_lpm(u, y, 1.0, order=2, half_width=2)
     with pytest.raises(InputError, match="lines to fit"):
         fit_rational(r, 4, 4, f_band_hz=(0.05, 0.052))
+
+
+def test_cli_single_record(tmp_path, capsys):
+    """``mocapfj frf --single-record``: JSON with the LPM FRF and the rational model's modes; a
+    two-inertia model or a reference with a single record: one line, exit 2, nothing written."""
+    import json
+
+    from mocapfj.cli import main
+    from mocapfj.io.csvio import write_csv_columns
+
+    u, y, _ = _simulate(7, noise=0.02)
+    fs = 100.0
+    write_csv_columns(tmp_path / "rec.csv", {"time": np.arange(u.size) / fs, "tau": u, "acc": y})
+    code = main(["frf", str(tmp_path / "rec.csv"), "--input", "tau", "--output", "acc", "--single-record",
+                 "--order", "4", "4", "--out", str(tmp_path / "out"), "--json"])
+    s = json.loads(capsys.readouterr().out)
+    assert code == 0 and s["single_record"] and s["frf"]["estimator"] == "lpm" and s["frf"]["lpm"]["dof"] == 3
+    assert [m["kind"] for m in s["modes"]] == [m[0] for m in ARM]
+    for m, (_, f0, _) in zip(s["modes"], ARM):
+        assert abs(m["f_hz"] / (f0 * fs) - 1) < 0.02 and m["f_hz_std"] > 0
+    assert (tmp_path / "out" / "frf.json").is_file() and (tmp_path / "out" / "frf.csv").is_file()
+    for extra in (["--model", "two_inertia"], ["--reference", "tau"]):
+        code = main(["frf", str(tmp_path / "rec.csv"), "--input", "tau", "--output", "acc", "--single-record",
+                     *extra, "--out", str(tmp_path / "bad")])
+        err = capsys.readouterr().err
+        assert code == 2 and len(err.strip().splitlines()) == 1 and not (tmp_path / "bad").exists()
