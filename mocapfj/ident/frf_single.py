@@ -17,6 +17,10 @@ Bias: the polynomial fails across a resonance narrower than a few lines (its hal
 2 zeta f_r, in lines, below about 2 n); then the noise variance there is overstated, which the fit
 below weights down.
 
+The classical alternative, :func:`estimate_frf_welch`: H1 averaged over overlapped windowed
+segments with the ordinary coherence and the Bendat-Piersol variance; coarser (fs / segment), no
+transient removal, biased where |G| changes within a segment's resolution.
+
 Rational model (Pintelon and Schoukens 2012, §9): G(s) = B(s) / A(s), s = j w / w_n (w_n the top
 of the band, for conditioning), A monic of degree n_a, B of degree n_b, optionally times
 exp(-s tau) (a delay). Weighted nonlinear least squares on the complex FRF, sum |G_k - G(s_k)|^2 /
@@ -39,7 +43,7 @@ from .frf import FRF, Distortion
 from .frf_fit import Mode
 from .result import Parameter
 
-__all__ = ["estimate_frf_lpm", "SingleRecordFRF", "RationalFit", "fit_rational", "rational_frf"]
+__all__ = ["estimate_frf_lpm", "estimate_frf_welch", "SingleRecordFRF", "RationalFit", "fit_rational", "rational_frf"]
 
 
 def _signal(name, x):
@@ -162,6 +166,55 @@ def estimate_frf_lpm(u, y, fs_hz: float, *, order: int = 2, half_width: int | No
               lines=k, estimator="lpm", n_periods=1, n_realisations=1, fs_hz=float(fs_hz), n_samples=N,
               closed_loop=False, distortion=dist)
     return SingleRecordFRF(frf=frf, cov=cov, dof=q, order=R, half_width=n)
+
+
+def estimate_frf_welch(u, y, fs_hz: float, *, segment: int = 256, overlap: float = 0.5, window: str = "hann",
+                       min_rel_amplitude: float = 1e-2) -> FRF:
+    """The classical segment-averaged H1 = S_uy / S_uu with the ordinary coherence (Welch 1967;
+    Bendat and Piersol 2010, §9.2): no transient removal, a resolution of fs / segment, and a bias
+    where |G| changes within that; what a sceptic checks the LPM against.
+
+    var: E|dH|^2 = (1 - gamma^2) / (n_d gamma^2) |H|^2 (Bendat and Piersol eq. 9.52 and 9.65: the
+    relative SD of |H| and the SD of the phase, rad, are each sqrt((1 - gamma^2) / (2 n_d gamma^2))),
+    with n_d the equivalent number of independent segments of the overlapped window (Welch 1967):
+    K / (1 + 2 sum_j (1 - j / K) c_j^2), c_j the window's overlap correlation at shift j.
+    Returns an FRF with estimator "welch", n_periods = K segments, n_samples = segment.
+    """
+    from scipy import signal as sps
+
+    u, y = _signal("u", u), _signal("y", y)
+    if y.shape != u.shape:
+        raise InputError(None, "y", f"the shape of u {u.shape}", y.shape)
+    if int(segment) != segment or segment < 16 or segment > u.size:
+        raise InputError(None, "segment", f"a whole number of samples within 16..{u.size}", segment)
+    if not 0 <= overlap < 1:
+        raise InputError(None, "overlap", "a fraction in [0, 1)", overlap)
+    seg = int(segment)
+    nov = int(round(overlap * seg))
+    step = seg - nov
+    K = (u.size - nov) // step
+    if K < 2:
+        raise InputError(None, "u", f"at least 2 segments of {seg} samples", f"{u.size} samples")
+    kw = dict(fs=fs_hz, window=window, nperseg=seg, noverlap=nov, detrend=False)
+    f, Suu = sps.welch(u, **kw)
+    _, Syy = sps.welch(y, **kw)
+    _, Suy = sps.csd(u, y, **kw)                                  # conj(U) Y
+    k = np.flatnonzero(Suu > min_rel_amplitude ** 2 * Suu.max()) if Suu.max() > 0 else np.empty(0, int)
+    k = k[(k >= 1) & (k <= seg // 2 - 1)]
+    if k.size == 0:
+        raise InputError(None, "u", "an input with some excitation", "no line excited")
+    H = Suy[k] / Suu[k]
+    coh = np.abs(Suy[k]) ** 2 / np.maximum(Suu[k] * Syy[k], 1e-300)
+    w = sps.get_window(window, seg)
+    cj = np.array([np.sum(w[: seg - j * step] * w[j * step:]) ** 2 for j in range(1, K) if j * step < seg])
+    cj = cj / np.sum(w * w) ** 2
+    n_d = K / (1 + 2 * np.sum((1 - np.arange(1, cj.size + 1) / K) * cj))
+    var = (1 - coh) / np.maximum(coh, 1e-12) / n_d * np.abs(H) ** 2
+    empty = np.empty(0)
+    dist = Distortion(empty, empty, empty, empty, empty, empty, float(np.sqrt(np.mean(Syy[k]))), None, None, None,
+                      False, False)
+    return FRF(f_hz=f[k], G=H, var=var, var_total=None, coherence=coh, lines=k, estimator="welch", n_periods=K,
+               n_realisations=1, fs_hz=float(fs_hz), n_samples=seg, closed_loop=False, distortion=dist)
 
 
 def rational_frf(f_hz, b, a, *, w_norm: float, tau: float = 0.0) -> np.ndarray:

@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from mocapfj.ident.frf_single import estimate_frf_lpm, fit_rational
+from mocapfj.ident.frf_single import estimate_frf_lpm, estimate_frf_welch, fit_rational
 
 BAND = 0.22           # the input's band ends near 0.2 cycles per sample; the model's poles beyond are not modes
 
@@ -33,6 +33,8 @@ def test_daisy_arm_frf_coherence_and_modes(arm):
     f = r.frf
     assert f.f_hz.size == 199 and f.f_hz[0] == pytest.approx(1 / 1024) and 0.215 < f.f_hz[-1] < 0.22
     assert np.median(f.coherence) > 0.93 and np.mean(f.coherence > 0.9) > 0.55   # measured 0.961, 0.61
+    welch = estimate_frf_welch(u, y, 1.0, segment=256)   # the ordinary coherence, 7 segments: median 0.959
+    assert abs(np.median(welch.coherence) - np.median(f.coherence)) < 0.03
     fit = fit_rational(r, 6, 6)
     assert 0.7 < fit.chi2_red < 1.2                      # measured 0.90; (4, 4) leaves 11.8
     assert fit_rational(r, 4, 4).chi2_red > 5
