@@ -171,11 +171,11 @@ def estimate_frf_lpm(u, y, fs_hz: float, *, order: int = 2, half_width: int | No
 def estimate_frf_welch(u, y, fs_hz: float, *, segment: int = 256, overlap: float = 0.5, window: str = "hann",
                        min_rel_amplitude: float = 1e-2) -> FRF:
     """The classical segment-averaged H1 = S_uy / S_uu with the ordinary coherence (Welch 1967;
-    Bendat and Piersol 2010, §9.2): no transient removal, a resolution of fs / segment, and a bias
+    Bendat and Piersol 2010): no transient removal, a resolution of fs / segment, and a bias
     where |G| changes within that; what a sceptic checks the LPM against.
 
-    var: E|dH|^2 = (1 - gamma^2) / (n_d gamma^2) |H|^2 (Bendat and Piersol eq. 9.52 and 9.65: the
-    relative SD of |H| and the SD of the phase, rad, are each sqrt((1 - gamma^2) / (2 n_d gamma^2))),
+    var: E|dH|^2 = (1 - gamma^2) / (n_d gamma^2) |H|^2 (Bendat and Piersol 2010, the random errors
+    of frequency-response estimates: the relative SD of |H| and the SD of the phase, rad, are each sqrt((1 - gamma^2) / (2 n_d gamma^2))),
     with n_d the equivalent number of independent segments of the overlapped window (Welch 1967):
     K / (1 + 2 sum_j (1 - j / K) c_j^2), c_j the window's overlap correlation at shift j.
     Returns an FRF with estimator "welch", n_periods = K segments, n_samples = segment.

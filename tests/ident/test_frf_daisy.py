@@ -1,5 +1,5 @@
 """The single-record FRF and the rational fit on real data: DaISy 96-009, a flexible robot arm
-(KU Leuven; De Moor, DaISy: Database for the Identification of Systems, 1997): 1024 samples of one
+(KU Leuven; DaISy, De Moor et al. 1997): 1024 samples of one
 periodic sine sweep, column 1 the reaction torque (input), column 2 the arm's acceleration (output),
 frequencies normalised (cycles per sample, no sampling rate given). No published model: the checks
 are the coherence, a fit at the noise level (chi2 / dof near 1), every in-band mode found by the
