@@ -17,6 +17,13 @@ and Banks (2007), Table I; a light cobot joint; a heavy industrial joint. Loop b
 damping 0.8 on I + J. Trajectories: slow (0.2 + 0.6 Hz) and fast (0.5 + 1.5 Hz) with a 1 s ramp.
 The table gives link error RMS and maximum (mrad) and the ratio rigid / flexible.
 
+Section 2 (skipped with --quick): models identified by mocapfj itself (``identify_joint``,
+output error) from simulated recordings of the hinge generator (mocapfj.synth.hinge: the PA-10
+reference row and the cobot and heavy cases of ``small_grid(3)``; markers, torque noise, resolver),
+each used as the controller's model on its true joint; beside it the same model with every
+parameter drawn again from its reported SD (x1 and x3, `--draws` draws) and the rigid model built
+from the identified parameters (I + J, b, gravity, friction).
+
     python benchmarks/bench_control_validation.py            # ~1-2 min on one core
     python benchmarks/bench_control_validation.py --quick
 """
@@ -104,6 +111,59 @@ def main():
             total += dt
             print("\n".join(rows), flush=True)
     print(f"\nsimulation time {total:.1f} s")
+    if not a.quick:
+        identified_section(duration, draws, a.seed)
+
+
+def identified_section(duration, draws, seed):
+    import mocapfj
+    from mocapfj.synth.hinge import first_row_case, simulate_hinge, small_grid
+
+    print("\n## Models identified by mocapfj (output error) from simulated recordings\n")
+    print("| joint | trajectory | controller model | RMS (mrad) | max (mrad) | feedback share | rigid/this RMS | "
+          "rigid/this max |")
+    print("|---|---|---|---|---|---|---|---|")
+    notes = []
+    for case in [first_row_case(7)] + small_grid(3)[1:3]:
+        t0 = time.perf_counter()
+        rec, _ = simulate_hinge(case)
+        s = mocapfj.signals(rec)["j1"]
+        res = mocapfj.identify_joint(s.t, s.q, s.q_m, s.u, fs_hz=s.fs_hz, method="output_error",
+                                     measured=s.measured, controller=(s.t_c, s.q_m_c, s.u_c, s.fs_c_hz))
+        t_id = time.perf_counter() - t0
+        plant = JointModel(name=case.family, gear_ratio=case.gear_ratio, I=case.I, J=case.J, mglx=case.mglx,
+                           mgly=case.mgly, b=case.b, friction=case.friction_element(), spring=case.spring_element())
+        ident = res.model
+        rel = {n: abs(p.std / p.value) for n, p in res.params.items() if p.value != 0}
+        err = {n: 100 * (p.value - getattr(case, n)) / abs(getattr(case, n)) for n, p in res.params.items()}
+        notes.append(f"{case.family}: identification {t_id:.0f} s; errors (%) "
+                     + ", ".join(f"{n} {e:+.2f}" for n, e in err.items()) + "; reported SDs (%) "
+                     + ", ".join(f"{n} {100 * v:.2f}" for n, v in rel.items()))
+        rng = np.random.default_rng(seed)
+        ctrls = [ComputedTorque("identified", ident), ComputedTorque("true flexible", plant),
+                 ComputedTorque("rigid (identified)", ident, flexible=False),
+                 ComputedTorque("rigid (true)", plant, flexible=False)]
+        for m in (1, 3):
+            ctrls += [ComputedTorque(f"sd{m}_{d}", perturbed(ident, {n: m * v for n, v in rel.items()}, rng))
+                      for d in range(draws)]
+        kp, kd = lab_gains(plant, 5.0)
+        for tname, traj in TRAJECTORIES.items():
+            r = control_check(plant, ctrls, traj, duration, kp=kp, kd=kd)
+            rig = r.run("rigid (identified)")
+
+            def row(label, x):
+                print(f"| {case.family} | {tname} | {label} | {1e3 * x.rms_rad:.3f} | {1e3 * x.max_rad:.3f} | "
+                      f"{x.feedback_share:.3f} | {rig.rms_rad / x.rms_rad:.1f} | {rig.max_rad / x.max_rad:.1f} |")
+            for n in ("identified", "true flexible", "rigid (identified)", "rigid (true)"):
+                row(n, r.run(n))
+            for m in (1, 3):
+                xs = sorted((r.run(f"sd{m}_{d}") for d in range(draws)), key=lambda x: x.rms_rad)
+                row(f"identified, redrawn {m} SD, median", xs[len(xs) // 2])
+                row(f"identified, redrawn {m} SD, worst", xs[-1])
+            sys.stdout.flush()
+    print()
+    for n in notes:
+        print("- " + n)
 
 
 if __name__ == "__main__":

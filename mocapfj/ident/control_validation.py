@@ -161,20 +161,25 @@ def lab_gains(model: JointModel, bandwidth_hz: float, zeta: float = 0.8) -> tupl
     return M * w * w, 2 * check_scalar(zeta, "zeta", positive=True) * M * w
 
 
-def perturbed(model: JointModel, rel_sd: float, rng: np.random.Generator) -> JointModel:
+def perturbed(model: JointModel, rel_sd, rng: np.random.Generator) -> JointModel:
     """`model` with I, J, mglx, mgly, b, the friction coefficients and the linear spring's k each
-    multiplied by (1 + rel_sd N(0, 1)) (independent draws from `rng`): a model with identification
-    errors of relative SD `rel_sd`."""
-    rel_sd = check_scalar(rel_sd, "rel_sd", nonneg=True)
+    multiplied by (1 + s N(0, 1)) (independent draws from `rng`): a model with identification
+    errors. `rel_sd` is one relative SD s for all, or {name: s} (names I, J, mglx, mgly, b, k and
+    the friction's params, e.g. c, v; a missing name is left exact), e.g. an identification's
+    reported SD / value."""
     if not isinstance(model.spring, LinearSpring):
         raise InputError(None, "spring", "a LinearSpring", type(model.spring).__name__)
+    if isinstance(rel_sd, dict):
+        sd = {str(n): check_scalar(v, f"rel_sd[{n}]", nonneg=True) for n, v in rel_sd.items()}
+    else:
+        one = check_scalar(rel_sd, "rel_sd", nonneg=True)
+        sd = {n: one for n in ("I", "J", "mglx", "mgly", "b", "k", *model.friction.params)}
 
-    def f():
-        return 1.0 + rel_sd * float(rng.standard_normal())
-    changes = {n: getattr(model, n) * f() for n in ("I", "J", "mglx", "mgly", "b")}
-    fr = model.friction
-    fr = replace(fr, **{n: v * f() for n, v in fr.params.items()})
-    return model.with_(friction=fr, spring=LinearSpring(model.spring.k * f()), **changes)
+    def f(n):
+        return 1.0 + sd.get(n, 0.0) * float(rng.standard_normal())
+    changes = {n: getattr(model, n) * f(n) for n in ("I", "J", "mglx", "mgly", "b")}
+    fr = replace(model.friction, **{n: v * f(n) for n, v in model.friction.params.items()})
+    return model.with_(friction=fr, spring=LinearSpring(model.spring.k * f("k")), **changes)
 
 
 # ---- result --------------------------------------------------------------------------------------

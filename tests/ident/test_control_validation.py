@@ -108,3 +108,15 @@ def test_bad_input():
         ComputedTorque("a", object())
     with pytest.raises(InputError, match="name"):
         control_check(PA10, [c], FAST, 0.1, kp=kp, kd=kd).run("nope")
+
+
+def test_perturbed_draws_have_the_stated_sd():
+    rng = np.random.default_rng(11)
+    ms = [perturbed(PA10, 0.05, rng) for _ in range(400)]
+    for n in ("I", "J", "mglx", "b"):
+        r = np.array([getattr(m, n) for m in ms]) / getattr(PA10, n) - 1
+        assert abs(r.std() - 0.05) < 0.006 and abs(r.mean()) < 0.008
+    k = perturbed(PA10, {"k": 0.1}, rng)
+    assert k.spring.k != 1.19e4 and (k.I, k.J, k.mglx, k.b, k.friction) == (6.15, 12.57, 111.64, 23.28, PA10.friction)
+    with pytest.raises(InputError, match="rel_sd"):
+        perturbed(PA10, -0.1, rng)
