@@ -5,7 +5,7 @@ record (one period of a sweep, a random excitation, a recording that was never r
 such spread; here the noise comes from the record's own spectrum instead.
 
 Local polynomial method (LPM; Pintelon, Schoukens, Vandersteen and Barbé 2010; Pintelon and
-Schoukens 2012, §7.2): the DFT of a finite record of a linear system is Y(k) = G(k) U(k) + T(k) +
+Schoukens 2012): the DFT of a finite record of a linear system is Y(k) = G(k) U(k) + T(k) +
 V(k), with T the transient (leakage) term, smooth in k. Around each line k, over the 2 n + 1 lines
 k + r, r = -n..n, G and T are replaced by polynomials of degree R in r; the complex linear least
 squares of the 2 (R + 1) coefficients gives G(k) (the constant term), and its residuals the output
@@ -21,10 +21,11 @@ The classical alternative, :func:`estimate_frf_welch`: H1 averaged over overlapp
 segments with the ordinary coherence and the Bendat-Piersol variance; coarser (fs / segment), no
 transient removal, biased where |G| changes within a segment's resolution.
 
-Rational model (Pintelon and Schoukens 2012, §9): G(s) = B(s) / A(s), s = j w / w_n (w_n the top
+Rational model (Pintelon and Schoukens 2012): G(s) = B(s) / A(s), s = j w / w_n (w_n the top
 of the band, for conditioning), A monic of degree n_a, B of degree n_b, optionally times
 exp(-s tau) (a delay). Weighted nonlinear least squares on the complex FRF, sum |G_k - G(s_k)|^2 /
-var_k, started by Sanathanan-Koerner iterations (linearised, reweighted by 1 / |A|^2).
+var_k, started by the iterations of Sanathanan and Koerner (1963) (linearised, reweighted by
+1 / |A|^2).
 Covariance (A^T A)^-1 x max(1, chi2 / dof) x (1 + 3 / q^2) (the allowance for noisy weights of
 :mod:`.frf_fit`). Resonances are the complex pole pairs, anti-resonances the complex zero pairs,
 f = |p| / 2 pi, zeta = -Re p / |p|; their SDs by the delta method through the root sensitivities
@@ -279,8 +280,9 @@ def _root_modes(c, cov_c, kind, w_norm):
         dz = np.array([-1 / m + x * x / m ** 3, x * yv / m ** 3])
         Dp = np.vstack([g.real, g.imag])                                # d(x, y) / dc
         Jf, Jz = df @ Dp, dz @ Dp
+        vf, vz = Jf @ cov_c @ Jf, Jz @ cov_c @ Jz                       # negative: not determined, NaN
         out.append(Mode(kind, float(m * w_norm / (2 * np.pi)), float(-x / m),
-                        float(np.sqrt(max(Jf @ cov_c @ Jf, 0.0))), float(np.sqrt(max(Jz @ cov_c @ Jz, 0.0)))))
+                        float(np.sqrt(vf)) if vf >= 0 else np.nan, float(np.sqrt(vz)) if vz >= 0 else np.nan))
     return sorted(out, key=lambda md: md.f_hz)
 
 
@@ -344,8 +346,15 @@ def fit_rational(frf: FRF, n_b: int, n_a: int, *, delay: bool = False, f_band_hz
     dof_fit = 2 * f.size - npar
     chi2 = float(2 * sol.cost)
     q = int(dof) if dof is not None else frf.n_realisations * max(frf.n_periods - 1, 1)
+    cs = np.linalg.norm(Ajac, axis=0)
+    cs = np.where(cs > 0, cs, 1.0)
+    _, sv, Vt = np.linalg.svd(Ajac / cs, full_matrices=False)
+    if sv.min() <= 1e-9 * sv.max():
+        raise InputError(None, "order", "a model whose coefficients the FRF determines",
+                         f"(n_b, n_a) = ({n_b}, {n_a}){' with a delay' if delay else ''}: the fit's Jacobian has "
+                         f"condition {sv.max() / max(sv.min(), 1e-300):.2g}", hint="lower the order or drop the delay")
     try:
-        H = np.linalg.inv(Ajac.T @ Ajac)
+        H = (Vt.T / sv ** 2) @ Vt / np.outer(cs, cs)                       # (A^T A)^-1, by the SVD
         if full_cov is not None:     # sandwich: the weighted residuals' covariance with the lines' correlation
             C = full_cov[np.ix_(sel, sel)] / np.outer(sd, sd)
             Cri = 0.5 * np.block([[C.real, -C.imag], [C.imag, C.real]])
@@ -353,6 +362,12 @@ def fit_rational(frf: FRF, n_b: int, n_a: int, *, delay: bool = False, f_band_hz
         cov = H * max(1.0, chi2 / max(dof_fit, 1)) * (1.0 + 3.0 / max(q, 1) ** 2)
     except np.linalg.LinAlgError:
         cov = np.full((npar, npar), np.nan)
+    ev = np.linalg.eigvalsh(cov / np.sqrt(np.outer(np.abs(np.diag(cov)), np.abs(np.diag(cov))) + 1e-300))
+    if not np.all(np.isfinite(ev)) or ev.min() < -1e-8:                  # the correlation matrix: PSD up to rounding
+        raise InputError(None, "order", "a model whose coefficients the FRF determines",
+                         f"(n_b, n_a) = ({n_b}, {n_a}){' with a delay' if delay else ''}: the covariance of its "
+                         "coefficients is not positive semi-definite (numerically singular)",
+                         hint="lower the order or drop the delay")
     x = sol.x
     b, a = x[:nb1], np.r_[1.0, x[nb1:nb1 + na]]
     cov_b = cov[:nb1, :nb1]

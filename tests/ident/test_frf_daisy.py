@@ -11,6 +11,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from mocapfj.errors import InputError
 from mocapfj.ident.frf_single import estimate_frf_lpm, estimate_frf_welch, fit_rational
 
 BAND = 0.22           # the input's band ends near 0.2 cycles per sample; the model's poles beyond are not modes
@@ -38,6 +39,8 @@ def test_daisy_arm_frf_coherence_and_modes(arm):
     fit = fit_rational(r, 6, 6)
     assert 0.7 < fit.chi2_red < 1.2                      # measured 0.90; (4, 4) leaves 11.8
     assert fit_rational(r, 4, 4).chi2_red > 5
+    with pytest.raises(InputError, match="lower the order or drop the delay"):   # over-parametrised: no SDs
+        fit_rational(r, 6, 6, delay=True)
     modes = _in_band(fit)
     assert [m.kind for m in modes] == ["antiresonance", "resonance", "resonance", "antiresonance"]
     U, Y = np.fft.rfft(u), np.fft.rfft(y)
