@@ -115,6 +115,8 @@ def run_frf(path, out, *, input: str, output: str, reference: str | None = None,
         raise InputError(None, "transient", "a whole number >= 0 or auto", transient)
     if int(realisations) != realisations or realisations < 1:
         raise InputError(None, "realisations", "a whole number >= 1", realisations)
+    if order is not None and model != "rational":
+        raise InputError(None, "order", "only with the rational model (--single-record)", list(order))
     if single_record or model == "rational":
         return _run_single(path, out, input=input, output=output, reference=reference, time=time, model=model,
                            order=order, single_record=single_record)

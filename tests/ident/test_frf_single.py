@@ -169,7 +169,7 @@ def test_cli_single_record(tmp_path, capsys):
     for m, (_, f0, _) in zip(s["modes"], ARM):
         assert abs(m["f_hz"] / (f0 * fs) - 1) < 0.02 and m["f_hz_std"] > 0
     assert (tmp_path / "out" / "frf.json").is_file() and (tmp_path / "out" / "frf.csv").is_file()
-    for extra in (["--model", "two_inertia"], ["--reference", "tau"]):
+    for extra in (["--model", "two_inertia"], ["--reference", "tau"], ["--model", "none", "--order", "2", "2"]):
         code = main(["frf", str(tmp_path / "rec.csv"), "--input", "tau", "--output", "acc", "--single-record",
                      *extra, "--out", str(tmp_path / "bad")])
         err = capsys.readouterr().err
