@@ -57,7 +57,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 from scipy.signal import lfilter, resample_poly
 
-from ..dynamics.link_response import link_response
+from ..dynamics.link_response import link_response, substeps
 from ..errors import InputError
 from ..types import LSResult
 from .conditioning import check_signals, derivatives, lowpass, noise_floor_sd
@@ -107,6 +107,11 @@ LINK_BAND_FRACTION = 0.6
 """The comparison band's upper limit as a fraction of the link's resonance sqrt(k / I) / 2 pi."""
 
 _DEBUG = bool(os.environ.get("MOCAPFJ_OE_DEBUG"))
+# A trial whose link resonance needs more than SUBSTEP_GROWTH x the substeps per sample of the
+# problem's first simulation (and more than MIN_SUBSTEP_CAP) counts as diverged: 16 x the
+# resonance is 256 x the stiffness-to-inertia ratio, far outside what the data can support.
+SUBSTEP_GROWTH = 16
+MIN_SUBSTEP_CAP = 64
 FRICTION_SCALES = (0.003, 0.01, 0.03, 0.1)
 """Starting points of the tanh law's eps, as fractions of the motor velocity's RMS (each fitted
 briefly, the best refined)."""
@@ -352,6 +357,7 @@ class _Problem:
         self._cache = (None, None)
         self._x = np.zeros(len(OE_NAMES))
         self.dt = float(dt)           # the mocap instants' offset on the controller clock, s
+        self._n_first = None          # substeps per sample of the first simulation (_link)
 
     def set_noise(self, noise):
         """noise = ((a_q, sd_q), (a_u, sd_u)): the whitening filters and innovation SDs."""
@@ -372,6 +378,16 @@ class _Problem:
 
     def _link(self, x, sens=False):
         p = dict(zip(OE_NAMES, x))
+        # A trial step towards a vanishing inertia or a huge stiffness raises the resonance, and the
+        # kernel's substeps with it, without bound (an hour for one simulation of a light joint):
+        # a resonance more than SUBSTEP_GROWTH x the first one simulated is treated as diverged.
+        n = substeps(p["I"], p["k"], 1.0 / self.d.fs, self.max_phase) if p["I"] > 0 and p["k"] > 0 else 1
+        if self._n_first is None:
+            self._n_first = n
+        if n > max(MIN_SUBSTEP_CAP, SUBSTEP_GROWTH * self._n_first):
+            T = self.d.q_drive.size
+            nan = np.full(T, np.nan)
+            return (nan, nan, np.full((T, 8), np.nan), np.full((T, 8), np.nan)) if sens else (nan, nan)
         return link_response(self.d.q_drive, self.d.fs, eps=p["eps"], k3=p["k3"], qd_m=self.d.qd_drive, sensitivities=sens,
                              max_phase=self.max_phase, **{n: p[n] for n in _LINK})
 
