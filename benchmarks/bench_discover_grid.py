@@ -333,6 +333,8 @@ def main(argv=None) -> int:
     ap.add_argument("--jobs", type=int, default=2)
     ap.add_argument("--reuse", action="store_true",
                     help="take the discovery.json an earlier (interrupted) run left for a case and kind")
+    ap.add_argument("--only-done", action="store_true",
+                    help="with --reuse: the table of the cases and kinds an earlier run finished, nothing run")
     ap.add_argument("--cache", type=Path, default=ROOT / "benchmarks" / ".cache" / "discover_grid")
     args = ap.parse_args(argv)
 
@@ -346,6 +348,8 @@ def main(argv=None) -> int:
         for k in kinds:        # a kind's size depends on (seed, case, kind) alone
             rng = np.random.default_rng(np.random.SeedSequence([args.base_seed, i, KINDS.index(k)]))
             jobs.append((c, k, root, float(rng.uniform(0.3, 0.8)), float(rng.choice([-1.0, 1.0])), args.reuse))
+    if args.only_done:
+        jobs = [j for j in jobs if (root / j[0].name / f"{j[1]}_out" / "discovery.json").exists()]
     tic = time.perf_counter()
     # one worker per case's kinds in order: the control bundle is written before the others use it
     with ProcessPoolExecutor(args.jobs) as ex:
