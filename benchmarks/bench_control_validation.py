@@ -17,6 +17,10 @@ and Banks (2007), Table I; a light cobot joint; a heavy industrial joint. Loop b
 damping 0.8 on I + J. Trajectories: slow (0.2 + 0.6 Hz) and fast (0.5 + 1.5 Hz) with a 1 s ramp.
 The table gives link error RMS and maximum (mrad) and the ratio rigid / flexible.
 
+Section 0: the fixed-step RK4 loop against the project's simulator: the torques each controller
+commanded, replayed open loop through ``mocapfj.dynamics.simulate`` (LSODA, rtol 1e-10, step
+<= 1/4 of the control period) from the same state; the largest link-angle difference.
+
 Section 2 (skipped with --quick): models identified by mocapfj itself (``identify_joint``,
 output error) from simulated recordings of the hinge generator (mocapfj.synth.hinge: the PA-10
 reference row and the cobot and heavy cases of ``small_grid(3)``; markers, torque noise, resolver),
@@ -91,6 +95,28 @@ def one(name, plant, tname, traj, duration, draws, seed):
     return rows, dt
 
 
+def integrator_check():
+    from mocapfj.dynamics import TorqueInput, simulate
+
+    plant = JOINTS["pa10_j2"]
+    kp, kd = lab_gains(plant, 5.0)
+    r = control_check(plant, [ComputedTorque("flexible", plant), ComputedTorque("rigid", plant, flexible=False)],
+                      TRAJECTORIES["fast"], 1.5, kp=kp, kd=kd)
+    sj = plant.single_joint(1e-3)
+    q0 = float(r.reference[0])
+    out = []
+    for b, run in enumerate(r.runs):
+        u = r.u[b]
+
+        def held(tt, u=u):
+            return u[np.clip(np.floor(np.asarray(tt) * r.rate_hz + 1e-9).astype(int), 0, u.size - 1)]
+        s = simulate(sj, r.t, TorqueInput(held), q0=[q0], qd0=[0.0], q_m0=sj.static_motor_angle(np.array([q0])),
+                     qd_m0=[0.0], rtol=1e-10, atol=1e-12, max_step=1 / (4 * r.rate_hz))
+        out.append(f"{run.name} {np.max(np.abs(s.q[:, 0] - r.q[b])):.1e} rad (its RMS error {run.rms_rad:.1e} rad)")
+    print("RK4 loop against mocapfj.dynamics.simulate (PA-10 joint 2, fast, 1.5 s), largest |q difference|: "
+          + "; ".join(out) + "\n")
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="3 s runs, 2 draws per error level")
@@ -104,6 +130,7 @@ def main():
     print("| joint | trajectory | controller model | RMS (mrad) | max (mrad) | feedback share | rigid/this RMS | "
           "rigid/this max |")
     print("|---|---|---|---|---|---|---|---|")
+    integrator_check()
     total = 0.0
     for i, (name, plant) in enumerate(JOINTS.items()):
         for j, (tname, traj) in enumerate(TRAJECTORIES.items()):

@@ -206,12 +206,14 @@ class ControlValidation:
     """Controllers tracking one reference on one plant.
 
     t : (T,) s, the control instants; reference : (T,) rad, q*; q : (B, T) rad, the link angle under
-    each controller (order of ``runs``); runs : per controller; kp, kd, rate_hz, substeps : the loop.
+    each controller (order of ``runs``); u : (B, T) N m, the torque each commanded from t[i] to
+    t[i + 1]; runs : per controller; kp, kd, rate_hz, substeps : the loop.
     """
 
     t: np.ndarray
     reference: np.ndarray
     q: np.ndarray
+    u: np.ndarray
     runs: tuple[TrackingRun, ...]
     kp: float
     kd: float
@@ -220,7 +222,7 @@ class ControlValidation:
     trajectory: dict
 
     def __post_init__(self) -> None:
-        for n in ("t", "reference", "q"):
+        for n in ("t", "reference", "q", "u"):
             object.__setattr__(self, n, freeze(np.asarray(getattr(self, n), dtype=np.float64)))
 
     def run(self, name: str) -> TrackingRun:
@@ -328,5 +330,5 @@ def control_check(plant: JointModel, controllers: Sequence[ComputedTorque], traj
                              motor_rms_rad=float(rms(em[b])), feedback_share=float(rms(u_fb[b]) / rms(u_all[b])),
                              u_rms=float(rms(u_all[b])))
                  for b, c in enumerate(controllers))
-    return ControlValidation(t=t, reference=q_ref, q=q_out, runs=runs, kp=kp, kd=kd, rate_hz=rate_hz,
+    return ControlValidation(t=t, reference=q_ref, q=q_out, u=u_all, runs=runs, kp=kp, kd=kd, rate_hz=rate_hz,
                              substeps=substeps, trajectory=trajectory.to_dict())
