@@ -18,6 +18,8 @@ from mocapfj.ident.frf_single import (SingleRecordFRF, estimate_frf_lpm, estimat
 # (kind, f in cycles per sample, zeta)
 ARM = (("antiresonance", 0.030, 0.02), ("resonance", 0.060, 0.03), ("resonance", 0.130, 0.02),
        ("antiresonance", 0.180, 0.03))
+DAISY_LIKE = (("antiresonance", 0.0322, 0.003), ("resonance", 0.0583, 0.002), ("resonance", 0.1267, 0.004),
+              ("antiresonance", 0.1795, 0.003))         # peaks 0.25-1 line wide, like the DaISy arm's
 ARM2 = (("antiresonance", 0.045, 0.015), ("resonance", 0.070, 0.04), ("resonance", 0.110, 0.025),
         ("antiresonance", 0.160, 0.02))
 
@@ -34,15 +36,15 @@ def _system(modes, gain=-0.1):
     return gain * num, den
 
 
-def _simulate(seed, modes=ARM, N=1024, noise=0.02, over=8, band=0.2, periodic=False):
+def _simulate(seed, modes=ARM, N=1024, noise=0.02, over=8, band=0.2, periodic=False, periods=3):
     rng = np.random.default_rng(seed)
     num, den = _system(modes)
     Nf = N * over
-    if periodic:                     # one period of a random-phase multisine, the third period simulated kept
+    if periodic:                     # one period of a random-phase multisine, the last of `periods` simulated kept
         k = np.arange(1, int(band * N))
         X = np.zeros(Nf // 2 + 1, complex)
         X[k] = np.exp(2j * np.pi * rng.random(k.size))
-        uf = np.tile(np.fft.irfft(X, Nf), 3)
+        uf = np.tile(np.fft.irfft(X, Nf), periods)
     else:                            # band-limited noise from rest: a transient at the start of the record
         X = np.fft.rfft(rng.standard_normal(2 * Nf))
         X[int(band * 2 * N):] = 0
@@ -108,12 +110,31 @@ def test_rational_fit_modes_and_their_sds(modes, periodic, noise, seeds):
     assert np.sqrt(np.mean(zs ** 2)) < 1.8 and np.abs(zs).max() < 3.5, zs.round(2)
 
 
+def test_periodic_record_with_modes_narrower_than_a_line():
+    """One steady-state period (8 simulated, the last kept) of a system whose peaks are 0.25-1 line
+    wide: the local polynomial smears the first resonance (its zeta off by more than 50 % on average,
+    up to a negative damping), the ratio Y / U with the LPM's noise (`periodic=True`) does not, and
+    its SDs cover the errors (z RMS below 1.8; measured 0.47-1.44 per mode on 6 seeds)."""
+    zs, rel_lpm = [], []
+    for seed in (200, 201):
+        u, y, _ = _simulate(seed, modes=DAISY_LIKE, noise=0.02, over=4, periodic=True, periods=8)
+        fit = fit_rational(estimate_frf_lpm(u, y, 1.0, periodic=True), 4, 4, f_band_hz=(0.005, 0.195))
+        assert [m.kind for m in fit.modes] == [m[0] for m in DAISY_LIKE]
+        for m, (_, f0, z0) in zip(fit.modes, DAISY_LIKE):
+            zs += [(m.f_hz - f0) / m.f_hz_std, (m.zeta - z0) / m.zeta_std]
+        smeared = fit_rational(estimate_frf_lpm(u, y, 1.0), 4, 4, f_band_hz=(0.005, 0.195))
+        rel_lpm.append(smeared.modes[1].zeta / DAISY_LIKE[1][2] - 1)
+    zs = np.array(zs)
+    assert np.sqrt(np.mean(zs ** 2)) < 1.8 and np.abs(zs).max() < 3.5, zs.round(2)
+    assert np.mean(np.abs(rel_lpm)) > 0.5, rel_lpm
+
+
 def test_welch_h1_variance_matches_the_error_away_from_the_modes():
     """Segment-averaged H1 on a 4096-sample record at 30 % output noise: the Bendat-Piersol variance
-    against the actual squared error at lines 0.02 away from the modes, mean ratio over 4 seeds
+    against the actual squared error at lines 0.02 away from the modes, mean ratio over 3 seeds
     0.7-1.6 (measured 1.1-1.2 on 6); bad segment lengths are clear errors."""
     ratios = []
-    for seed in range(4):
+    for seed in range(3):
         u, y, sys_ = _simulate(seed, noise=0.3, N=4096)
         F = estimate_frf_welch(u, y, 1.0, segment=128)
         far = F.f_hz < 0.19
