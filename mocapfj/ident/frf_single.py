@@ -96,7 +96,7 @@ def estimate_frf_lpm(u, y, fs_hz: float, *, order: int = 2, half_width: int | No
         leakage, G(k) = Y(k) / U(k) exactly up to the noise, and the local polynomials serve only
         to measure the noise, var G(k) = s^2(k) / |U(k)|^2 with the lines independent. Use it when
         modes are narrower than a few lines: the polynomial's G then smears the peak (on a
-        simulated mode 0.25 line wide, zeta came out 2-5x too large), the ratio does not
+        simulated mode 0.25 line wide, zeta came out 2-6x the truth), the ratio does not
 
     Returns a :class:`SingleRecordFRF`: its `frf` has estimator "lpm", n_periods = n_realisations = 1,
     `var` the LPM variance of G and `n_samples` the record length; its `cov` the errors' covariance
