@@ -397,6 +397,26 @@ def _cmd_precompensate(args) -> int:
     return 0
 
 
+def _cmd_control_check(args) -> int:
+    from .pipeline.control_check import run_control_check
+
+    s = run_control_check(args.model, plant=args.plant, joint=args.joint, q0=args.q0, amplitudes=args.amplitudes,
+                          frequencies=args.frequencies, ramp=args.ramp, duration=args.duration,
+                          bandwidth=args.bandwidth, zeta=args.zeta, rate=args.rate)
+
+    def human(s):
+        lines = [f"computed-torque tracking, joint {s['joint']} of {s['plant']} ({s['duration_s']:g} s, "
+                 f"{s['rate_hz']:g} Hz, kp {s['kp']:.4g}, kd {s['kd']:.4g}), feedforward from {s['model']}:"]
+        for r in s["runs"]:
+            lines.append(f"  {r['name']:<9} link error RMS {1e3 * r['rms_rad']:.4g} mrad, max {1e3 * r['max_rad']:.4g} "
+                         f"mrad, feedback share {r['feedback_share']:.3f}")
+        lines.append(f"  rigid / flexible: RMS {s['ratio_rms']:.2f}x, max {s['ratio_max']:.2f}x")
+        return "\n".join(lines)
+
+    _emit(args, s, human)
+    return 0
+
+
 def _cmd_clamped(args) -> int:
     from .pipeline.clamped import run_clamped
 
@@ -431,7 +451,7 @@ def _cmd_frf(args) -> int:
                 time=args.time, period_s=args.period,
                 model=args.model or ("rational" if args.single_record else "two_inertia"), transient=args.transient,
                 realisations=args.realisations, estimator=args.estimator, single_record=args.single_record,
-                order=args.order)
+                order=args.order, steady_period=args.steady_period)
 
     def human(s):
         f = s["frf"]
@@ -620,6 +640,22 @@ def build_parser() -> argparse.ArgumentParser:
     pc.add_argument("--json", action="store_true", help="print a JSON summary on stdout")
     pc.set_defaults(func=_cmd_precompensate)
 
+    cc = sub.add_parser("control-check", help="validate a joint model by computed-torque tracking against the rigid "
+                                              "model (Bompos et al. 2007)")
+    cc.add_argument("model", help="model file (mocapfj.model/1, e.g. from identify or discover) or scenario TOML")
+    cc.add_argument("--plant", default=None, help="the true joint's file (default: the model itself)")
+    cc.add_argument("--joint", default=None, help="joint name (default: the file's only joint)")
+    cc.add_argument("--q0", type=float, default=0.3, help="reference centre, rad (default 0.3)")
+    cc.add_argument("--amplitudes", default="0.3,0.06", help="reference sine amplitudes, rad, comma-separated")
+    cc.add_argument("--frequencies", default="0.5,1.5", help="reference sine frequencies, Hz, comma-separated")
+    cc.add_argument("--ramp", type=float, default=1.0, help="ramp-in of the reference, s (default 1)")
+    cc.add_argument("--duration", type=float, default=6.0, help="simulated time, s (default 6)")
+    cc.add_argument("--bandwidth", type=float, default=5.0, help="motor PD loop bandwidth on I + J, Hz (default 5)")
+    cc.add_argument("--zeta", type=float, default=0.8, help="motor PD loop damping (default 0.8)")
+    cc.add_argument("--rate", type=float, default=400.0, help="control rate, Hz (default 400, the PA-10's 2.5 ms)")
+    cc.add_argument("--json", action="store_true", help="print a JSON summary on stdout")
+    cc.set_defaults(func=_cmd_control_check)
+
     cl = sub.add_parser("clamped", help="joint stiffness with the end-effector clamped (Jubien et al. 2014)")
     cl.add_argument("csv", help="controller CSV: time, motor angles and torques (link side)")
     cl.add_argument("--positions", required=True, help="motor angle columns, comma-separated, in joint order, rad")
@@ -653,6 +689,9 @@ def build_parser() -> argparse.ArgumentParser:
     fr.add_argument("--single-record", action="store_true",
                     help="one record without repeated periods: FRF by the local polynomial method "
                          "(Pintelon et al. 2010), open loop")
+    fr.add_argument("--steady-period", action="store_true",
+                    help="with --single-record: the record is one whole period in steady state (G = Y/U, the "
+                         "local polynomials for the noise only; for modes narrower than a DFT line)")
     fr.add_argument("--order", type=int, nargs=2, default=None, metavar=("NB", "NA"),
                     help="degrees of B and A of the rational model (default 4 4)")
     fr.add_argument("--estimator", default="auto", choices=["auto", "h1", "harmonic", "indirect"],

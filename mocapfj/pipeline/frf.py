@@ -88,7 +88,7 @@ def find_period(x, *, exact: bool) -> int | None:
 
 def run_frf(path, out, *, input: str, output: str, reference: str | None = None, time: str | None = None,
             period_s: float | None = None, model: str = "two_inertia", transient="auto", realisations: int = 1,
-            estimator: str = "auto", single_record: bool = False, order=None) -> dict:
+            estimator: str = "auto", single_record: bool = False, order=None, steady_period: bool = False) -> dict:
     """``mocapfj frf``: the FRF of column `output` over column `input` (Makarov et al. 2012, eq. 23-27),
     and the two-inertia model fitted to it with its modes.
 
@@ -97,7 +97,8 @@ def run_frf(path, out, *, input: str, output: str, reference: str | None = None,
     (else the input) repeats. `single_record`: the record is one period or not periodic at all, the FRF
     comes from :func:`mocapfj.ident.frf_single.estimate_frf_lpm` (the noise from the record's own
     spectrum) and the model is ``"rational"`` (degrees `order` = (n_b, n_a), default (4, 4):
-    :func:`mocapfj.ident.frf_single.fit_rational`) or ``"none"``.
+    :func:`mocapfj.ident.frf_single.fit_rational`) or ``"none"``; `steady_period`: that record is one whole
+    period in steady state (G = Y / U, the LPM for the noise only; modes narrower than a DFT line).
     Writes OUT/frf.json (the summary) and OUT/frf.csv (per line: f_hz,
     the FRF, magnitude, phase, coherence, noise SD, and the model's FRF).
     """
@@ -115,11 +116,13 @@ def run_frf(path, out, *, input: str, output: str, reference: str | None = None,
         raise InputError(None, "transient", "a whole number >= 0 or auto", transient)
     if int(realisations) != realisations or realisations < 1:
         raise InputError(None, "realisations", "a whole number >= 1", realisations)
+    if steady_period and not single_record:
+        raise InputError(None, "steady-period", "only with --single-record", True)
     if order is not None and model != "rational":
         raise InputError(None, "order", "only with the rational model (--single-record)", list(order))
     if single_record or model == "rational":
         return _run_single(path, out, input=input, output=output, reference=reference, time=time, model=model,
-                           order=order, single_record=single_record)
+                           order=order, single_record=single_record, periodic=steady_period)
     names = {"--input": input, "--output": output, "--reference": reference}
     csv, cols, t = read_frf_columns(path, names, time)
     fs = (t.size - 1) / float(t[-1] - t[0])
@@ -169,7 +172,7 @@ def run_frf(path, out, *, input: str, output: str, reference: str | None = None,
     return summary
 
 
-def _run_single(path, out, *, input, output, reference, time, model, order, single_record) -> dict:
+def _run_single(path, out, *, input, output, reference, time, model, order, single_record, periodic=False) -> dict:
     """``mocapfj frf --single-record``: the LPM FRF of one record and the rational model (see run_frf)."""
     from ..ident.frf_single import estimate_frf_lpm, fit_rational
 
@@ -187,7 +190,7 @@ def _run_single(path, out, *, input, output, reference, time, model, order, sing
     csv, cols, t = read_frf_columns(path, {"--input": input, "--output": output}, time)
     fs = (t.size - 1) / float(t[-1] - t[0])
     try:
-        r = estimate_frf_lpm(cols["--input"], cols["--output"], fs)
+        r = estimate_frf_lpm(cols["--input"], cols["--output"], fs, periodic=periodic)
     except InputError as e:
         col = {"u": input, "y": output}.get(e.field)
         if e.file == "<argument>" and col is not None:

@@ -190,8 +190,15 @@ def test_cli_single_record(tmp_path, capsys):
     for m, (_, f0, _) in zip(s["modes"], ARM):
         assert abs(m["f_hz"] / (f0 * fs) - 1) < 0.02 and m["f_hz_std"] > 0
     assert (tmp_path / "out" / "frf.json").is_file() and (tmp_path / "out" / "frf.csv").is_file()
-    for extra in (["--model", "two_inertia"], ["--reference", "tau"], ["--model", "none", "--order", "2", "2"]):
-        code = main(["frf", str(tmp_path / "rec.csv"), "--input", "tau", "--output", "acc", "--single-record",
+    u, y, _ = _simulate(8, noise=0.02, periodic=True)
+    write_csv_columns(tmp_path / "per.csv", {"time": np.arange(u.size) / fs, "tau": u, "acc": y})
+    code = main(["frf", str(tmp_path / "per.csv"), "--input", "tau", "--output", "acc", "--single-record",
+                 "--steady-period", "--out", str(tmp_path / "out_p"), "--json"])
+    s = json.loads(capsys.readouterr().out)
+    assert code == 0 and s["frf"]["lpm"]["periodic"] and [m["kind"] for m in s["modes"]] == [m[0] for m in ARM]
+    for extra in (["--single-record", "--model", "two_inertia"], ["--single-record", "--reference", "tau"],
+                  ["--single-record", "--model", "none", "--order", "2", "2"], ["--steady-period"]):
+        code = main(["frf", str(tmp_path / "rec.csv"), "--input", "tau", "--output", "acc",
                      *extra, "--out", str(tmp_path / "bad")])
         err = capsys.readouterr().err
         assert code == 2 and len(err.strip().splitlines()) == 1 and not (tmp_path / "bad").exists()
