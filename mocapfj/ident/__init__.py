@@ -18,7 +18,9 @@ spring models, friction, excitation design, n-link and rigid robots.
   a period, the logarithmic decrement, model-based pre-compensation (Oueslati et al. 2012); :mod:`.clamped`:
   stiffness with the end-effector clamped (Jubien, Abba and Gautier 2014). Imported on first use.
 - :mod:`.multisine`, :mod:`.frf`, :mod:`.frf_fit`: multisine excitation, the FRF from periodic data
-  and the two-inertia joint fitted to it (Makarov et al. 2012). Imported on first use.
+  and the two-inertia joint fitted to it (Makarov et al. 2012); :mod:`.frf_single`: the FRF of a
+  single record (local polynomial method, Welch's H1) and a rational model with its modes.
+  Imported on first use.
 
 See docs/architecture.md for what this package owns and may import.
 """
@@ -50,7 +52,9 @@ _LAZY = {"base_from_standard": "regressor", "base_parameters": "regressor", "loa
          "fit_clamped": "clamped", "mdh_model": "clamped", "ClampedStiffness": "clamped",
          "Multisine": "multisine", "design_multisine": "multisine", "multisine_realisations": "multisine",
          "write_multisine_reference": "multisine", "FRF": "frf", "estimate_frf": "frf", "FRFFit": "frf_fit",
-         "fit_two_inertia": "frf_fit", "two_inertia_frf": "frf_fit", "two_inertia_modes": "frf_fit"}
+         "fit_two_inertia": "frf_fit", "two_inertia_frf": "frf_fit", "two_inertia_modes": "frf_fit",
+         "estimate_frf_lpm": "frf_single", "estimate_frf_welch": "frf_single", "SingleRecordFRF": "frf_single",
+         "fit_rational": "frf_single", "rational_frf": "frf_single", "RationalFit": "frf_single"}
 
 __all__ = [
     "identify_joint", "identify_signals", "IDENTIFY_METHODS", "spring_pairs",
