@@ -120,3 +120,19 @@ def test_perturbed_draws_have_the_stated_sd():
     assert k.spring.k != 1.19e4 and (k.I, k.J, k.mglx, k.b, k.friction) == (6.15, 12.57, 111.64, 23.28, PA10.friction)
     with pytest.raises(InputError, match="rel_sd"):
         perturbed(PA10, -0.1, rng)
+
+
+def test_cli_control_check(capsys):
+    import json
+    from pathlib import Path
+
+    from mocapfj.cli import main
+
+    toml = Path(__file__).resolve().parents[2] / "datasets" / "pa10_joint2.toml"
+    assert main(["control-check", str(toml), "--duration", "1.5", "--json"]) == 0
+    s = json.loads(capsys.readouterr().out)
+    assert s["joint"] == "j2" and s["ratio_rms"] > 10 and [r["name"] for r in s["runs"]] == ["flexible", "rigid"]
+    assert main(["control-check", str(toml), "--frequencies", "0.5,x"]) == 2
+    assert "--frequencies" in capsys.readouterr().err
+    assert main(["control-check", str(toml), "--joint", "j9"]) == 2
+    assert "j9" in capsys.readouterr().err
