@@ -317,9 +317,10 @@ def control_check(plant: JointModel, controllers: Sequence[ComputedTorque], traj
             k4, l4 = deriv(x + h * k3, z + h * l3, u)
             x = x + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
             z = z + h / 6 * (l1 + 2 * l2 + 2 * l3 + l4)
-        if not np.all(np.isfinite(x)):
-            raise RuntimeError(f"closed loop left the finite numbers at t = {t[i]:.6g} s "
-                               f"(unstable gains or a step too coarse: substeps = {substeps})")
+        if not np.all(np.isfinite(x)) or np.max(np.abs(x[0])) > 1e3:
+            raise InputError(None, "kp, kd", "gains the loop is stable with at this rate and step",
+                             f"a closed loop diverging at t = {t[i]:.6g} s ({rate_hz:g} Hz, {substeps} substeps)",
+                             hint="lower the bandwidth or raise rate_hz / substeps")
 
     e = q_ref[None, :] - q_out
     em = qm_ref - qm_out

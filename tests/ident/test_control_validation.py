@@ -108,6 +108,9 @@ def test_bad_input():
         ComputedTorque("a", object())
     with pytest.raises(InputError, match="name"):
         control_check(PA10, [c], FAST, 0.1, kp=kp, kd=kd).run("nope")
+    kp, kd = lab_gains(PA10, 80.0)                   # a loop far beyond what 400 Hz holds
+    with pytest.raises(InputError, match="diverging"):
+        control_check(PA10, [c], FAST, 0.5, kp=kp, kd=kd)
 
 
 def test_perturbed_draws_have_the_stated_sd():
