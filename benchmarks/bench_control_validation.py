@@ -125,12 +125,12 @@ def main():
     ap.add_argument("--seed", type=int, default=20070601)
     a = ap.parse_args()
     duration, draws = (3.0, 2) if a.quick else (a.duration, a.draws)
+    integrator_check()
     print(f"## Computed-torque tracking on the true flexible joint ({duration:g} s, 400 Hz, 4 RK4 substeps, "
           f"{draws} draws per error level)\n")
     print("| joint | trajectory | controller model | RMS (mrad) | max (mrad) | feedback share | rigid/this RMS | "
           "rigid/this max |")
     print("|---|---|---|---|---|---|---|---|")
-    integrator_check()
     total = 0.0
     for i, (name, plant) in enumerate(JOINTS.items()):
         for j, (tname, traj) in enumerate(TRAJECTORIES.items()):
