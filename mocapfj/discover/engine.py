@@ -584,8 +584,13 @@ def discover(signals: dict, models: dict, *, fs_hz: float, validation: dict | No
                for f in fams.values()):
             stop = "the residuals are white"
             break
-        tried = [e for e in effects if not any(f["name"] == e for f in found)]
-        results = _search(fams, qdd, names, tried, holdout, skip=banned)
+        if robot is None:
+            tried, skip = [e for e in effects if not any(f["name"] == e for f in found)], banned
+        else:
+            # a robot's joints each have their own drivetrain, and share the recording's clock: an
+            # effect found on one joint is still looked for on the others
+            tried, skip = list(effects), banned | {(f["joint"], f["name"]) for f in found}
+        results = _search(fams, qdd, names, tried, holdout, skip=skip)
         if not results:
             stop = "no effect of the library applies"
             break

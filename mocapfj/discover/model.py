@@ -13,6 +13,12 @@ center_rad, half_range_rad},
 A scenario file (``mocapfj.scenario/1``) is read as a model file too, without its effects: the
 simulation a lab compares its robot with.
 
+The joints of a URDF robot (:mod:`.context`): a top-level ``urdf`` (the file's path, relative to
+the model file) and, per joint, ``urdf_joint`` (its name in the URDF, default the joint's name);
+every moving joint of the URDF has a table, I, mglx and mgly are optional there (default 0) and
+added to the link's inertia and gravity from the URDF. A scenario with ``robot.model = "urdf"``
+is read so, its URDF built from the scenario.
+
 Output-error simulation: the link is driven by the recorded motor angle (the motor's position
 loop is stiff: :class:`mocapfj.dynamics.PrescribedMotor`), with `mocapfj.dynamics.simulate`; it
 gives the link angle, the deflection and the motor torque the model needs for that motion.
