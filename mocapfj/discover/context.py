@@ -22,8 +22,10 @@ so the robot enters as four signals per joint, computed once per recording (:fun
   puts on this one.
 
 Measured or simulated: the configuration q is the recorded link angle (mocap, low-passed at 20
-Hz): a gravity gradient of ~100 N m/rad times its noise of ~1e-4 rad is 0.01 N m, where the motor
-angle would be off by the deflection (mrad, 1 N m on the elbow's gravity). The velocities and
+Hz), its zero set by the spring (the mean of q_m - tau_s / k, tau_s below): the joints stage
+aligns the link angle's zero to the motor's, off by the mean deflection (10 mrad on the elbow),
+and the motor angle itself is off by the deflection at every instant (mrad, a newton-metre on
+the elbow's gravity), where the mocap noise, ~1e-4 rad after the low-pass, costs 0.01 N m. The velocities and
 accelerations are not the mocap angle's: its second derivative carries its noise times
 (2 pi f)^2 into the band the comparison reads. They are the motor's (the Wiener-filtered drive's
 cubic spline, as the joint's own simulation takes them, :func:`.model.predict`) less the
@@ -32,8 +34,9 @@ deflection's, rebuilt from the motor side as the spring torque over the stiffnes
 :mod:`.residuals`, does the same above 2 Hz): each joint's deflection rings at its resonance and
 that ringing reaches the other joints through M_ji. On a 20 s control recording of
 pa10_joints23 the true model with its context scored 0.9 and 0.8 points below the noise floor
-(joints 2, 3) with the motor's accelerations, 0.2 and -0.1 with the deflection's removed, 0.0
-and -0.1 with the true link motion (benchmarks/bench_discover_nlink.py checks it on its controls).
+(joints 2, 3) with the motor's accelerations and the joints stage's zero, 0.2 and -0.1 with the
+deflection's accelerations removed, 0.0 and -0.1 with the zero set by the spring too, as with
+the true link motion (benchmarks/bench_discover_nlink.py checks it on its controls).
 
 The model file says which joints belong to the robot (docs/discovery.md, "A joint of a URDF
 robot"): ``urdf`` names the URDF, each joint's ``urdf_joint`` its name there (default its own);
@@ -51,7 +54,8 @@ import numpy as np
 
 from ..errors import InputError
 
-__all__ = ["Robot", "LinkContext", "RobotContext", "ROBOT_KEY", "robot_context", "robot_of", "urdf_joint_names"]
+__all__ = ["Robot", "LinkContext", "RobotContext", "ROBOT_KEY", "robot_context", "link_motion", "robot_of",
+           "urdf_joint_names"]
 
 ROBOT_KEY = "<robot>"
 """The key of the :class:`RobotContext` in the {joint: acceleration} maps discovery passes with
@@ -135,17 +139,15 @@ def robot_of(models: dict) -> Robot | None:
     return next(iter(robots)) if robots else None
 
 
-def robot_context(robot: Robot, signals: dict, models: dict) -> RobotContext:
-    """Each robot joint's context over a recording (module docstring).
+def link_motion(robot: Robot, signals: dict, models: dict) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(q, q', q'') (T, n) of the robot's links in its joint order over a recording, rad, rad/s,
+    rad/s^2 (module docstring: the recorded link angle with its zero set by the spring; the motor's
+    rates less the spring's deflection's).
 
     signals : {joint: JointSignals} on one clock, holding every moving joint of the robot;
     models : {joint: JointModel}, whose J, b, torque_gain and stiffness rebuild each link's
     motion from its motor's (the nominal models: the context is the recording's, fixed while
-    discovery changes the models).
-    Pinocchio runs once per sample and joint set (n + 3 calls of a few microseconds: 0.3 s for 60 s
-    of two joints at 250 Hz), once per recording."""
-    import pinocchio as pin
-
+    discovery changes the models)."""
     from ..ident.conditioning import derivatives, lowpass
     from .model import _spline_rates, _wiener_drive
     from .residuals import LINK_HZ
@@ -159,16 +161,32 @@ def robot_context(robot: Robot, signals: dict, models: dict) -> RobotContext:
     if any(s.t.shape != t.shape or not np.allclose(s.t, t, rtol=0, atol=1e-9) for s in sig):
         raise InputError(None, "recording", "the robot's joints on one clock", [s.t.shape for s in sig])
     fs = 1.0 / float(np.median(np.diff(t)))
-    q = np.stack([lowpass(np.asarray(s.q, dtype=np.float64), fs, LINK_HZ) for s in sig], axis=1)  # (T, n)
-    v, a = np.empty(q.shape), np.empty(q.shape)
+    q, v, a = (np.empty((t.size, len(sig))) for _ in range(3))
+    inner = slice(int(fs), t.size - int(fs))                  # 1 s trims: the filters' ends
     for j, s in enumerate(sig):
         m = models[robot.joints[j]]
-        qd_m, qdd_m = _spline_rates(t, _wiener_drive(np.asarray(s.q_m, dtype=np.float64), fs))
+        drive = _wiener_drive(np.asarray(s.q_m, dtype=np.float64), fs)
+        qd_m, qdd_m = _spline_rates(t, drive)
         tau_s = m.torque_gain * np.asarray(s.u, dtype=np.float64) - m.J * qdd_m - m.b * qd_m
-        dd, ddd = derivatives(lowpass(tau_s / m.stiffness(), fs, LINK_HZ), fs)
+        d_spring = lowpass(tau_s / m.stiffness(), fs, LINK_HZ)
+        dd, ddd = derivatives(d_spring, fs)
         v[:, j], a[:, j] = qd_m - dd, qdd_m - ddd
+        # the recorded link angle, its zero (the joints stage's is the motor's, off by the mean
+        # deflection) set by the spring: the mean of q_m - tau_s / k
+        q_l = lowpass(np.asarray(s.q, dtype=np.float64), fs, LINK_HZ)
+        q[:, j] = q_l - float(np.mean((q_l - (drive - d_spring))[inner]))
     if not (np.isfinite(q).all() and np.isfinite(v).all() and np.isfinite(a).all()):
         raise InputError(None, "recording", "finite link and motor angles for the robot's context", "NaN")
+    return q, v, a
+
+
+def robot_context(robot: Robot, signals: dict, models: dict) -> RobotContext:
+    """Each robot joint's context over a recording (module docstring), from the links' motion
+    (:func:`link_motion`, same arguments). Pinocchio runs once per sample and joint set (n + 3
+    calls of a few microseconds: 0.3 s for 60 s of two joints at 250 Hz), once per recording."""
+    import pinocchio as pin
+
+    q, v, a = link_motion(robot, signals, models)
     model = robot.pin_model()
     data = model.createData()
     T, n = q.shape
