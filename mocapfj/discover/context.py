@@ -38,8 +38,8 @@ pa10_joints23 the true model with its context scored 0.9 and 0.8 points below th
 deflection's accelerations removed, 0.0 and -0.1 with the zero set by the spring too, as with
 the true link motion (benchmarks/bench_discover_nlink.py checks it on its controls).
 
-The model file says which joints belong to the robot (docs/discovery.md, "A joint of a URDF
-robot"): ``urdf`` names the URDF, each joint's ``urdf_joint`` its name there (default its own);
+The model file says which joints belong to the robot (docs/discovery.md, "An effect on the
+second joint of a two-joint arm"): ``urdf`` names the URDF, each joint's ``urdf_joint`` its name there (default its own);
 the joint's own I, mglx, mgly are then added to the robot's (default 0: a rotor inertia on the
 link side, a gravity-model correction discovery may find).
 """
