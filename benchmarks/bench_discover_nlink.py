@@ -266,6 +266,7 @@ def _table(rows: list[dict]) -> str:
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--n", type=int, default=3, help="cases per kind")
+    ap.add_argument("--start", type=int, default=0, help="the first case (cases start..n-1 run)")
     ap.add_argument("--base-seed", type=int, default=31000)
     ap.add_argument("--workers", type=int, default=1)
     ap.add_argument("--kinds", default=",".join(KINDS))
@@ -275,7 +276,7 @@ def main(argv=None) -> int:
     out = Path(a.out)
     kinds = [k for k in a.kinds.split(",") if k]
     # the controls first: a case's planted recordings are sized on its control's trial
-    jobs = [(a.base_seed, i, k, out) for k in kinds for i in range(a.n)]
+    jobs = [(a.base_seed, i, k, out) for k in kinds for i in range(a.start, a.n)]
     rows = []
     with ProcessPoolExecutor(a.workers) as ex:
         for row in ex.map(run_case, *zip(*jobs)):
@@ -285,7 +286,7 @@ def main(argv=None) -> int:
             if "error" in row:
                 print(row["traceback"], flush=True)
     print()
-    print(f"base seed {a.base_seed}, {a.n} cases per kind")
+    print(f"base seed {a.base_seed}, cases {a.start}..{a.n - 1} of each kind")
     print(_table(rows))
     ctrl = [r for r in rows if r["kind"] == "control" and "gaps" in r]
     if ctrl:
