@@ -522,7 +522,8 @@ def position_dependent_friction(fam: Families, mask, others) -> Candidate | None
 
 def coupling(fam: Families, mask, others) -> Candidate | None:
     """Torque from the other recorded joints' link accelerations, -inertia x q_other''."""
-    srcs = [s for s in (others or {}) if s != fam.model.name and s not in fam.model.coupling]
+    srcs = [s for s in (others or {}) if s != fam.model.name and s not in fam.model.coupling
+            and isinstance(others[s], np.ndarray)]            # not a robot's context
     if not srcs:
         return None
     cols = [fam.lp(others[s]) for s in srcs] + [np.ones_like(fam.r_l)]

@@ -38,6 +38,7 @@ from ..errors import InputError
 from ..types import JointSignals
 from ..ident.conditioning import derivatives, lowpass
 from .effects import EFFECTS, FITTERS, SPRING_EFFECTS, Candidate
+from .context import ROBOT_KEY, robot_context, robot_of
 from .model import simulate_joint
 from .reident import REID_EFFECTS
 from .tournament import Judge, pool, score_dict
@@ -262,13 +263,17 @@ def _score(cand: Candidate, fam: Families, test: np.ndarray) -> dict:
             "n_effective": n_eff, "criterion": float(crit)}
 
 
-def _families_all(models, signals, fs_hz):
-    """Residual families of every joint (the coupling terms need the others' accelerations)."""
+def _families_all(models, signals, fs_hz, robot=None):
+    """Residual families of every joint (the coupling terms need the others' accelerations; a
+    robot's joints, the robot's context `robot`, which joins the accelerations' map)."""
     fams = {}
+    base = {ROBOT_KEY: robot} if robot is not None else None
     for name, m in models.items():
         s = signals[name]
-        fams[name] = families(m.with_(coupling={}), s.t, s.q, s.q_m, s.u, fs_hz=fs_hz)
+        fams[name] = families(m.with_(coupling={}), s.t, s.q, s.q_m, s.u, fs_hz=fs_hz, others_qdd=base)
     qdd = {name: f.qdd_hat for name, f in fams.items()}
+    if robot is not None:
+        qdd[ROBOT_KEY] = robot
     for name, m in models.items():
         if m.coupling:
             s = signals[name]
@@ -540,13 +545,18 @@ def discover(signals: dict, models: dict, *, fs_hz: float, validation: dict | No
     nominal = {n: models[n] for n in signals}
     current = dict(nominal)
     names = list(signals)
-    fams, qdd = _families_all(current, signals, fs_hz)
+    # a URDF robot's joints: what the other links put on each, from each recording (module .context)
+    robot = robot_of(nominal)
+    ctx = robot_context(robot, signals, nominal) if robot is not None else None
+    fams, qdd = _families_all(current, signals, fs_hz, ctx)
     location = {n: locate(fams[n]) for n in names}
     found, rejected, banned = [], [], set()
     # the other joints' accelerations on the validation recording, for coupling terms: the motor's
     # (the links follow them)
     vq = ({jn: lowpass(derivatives(lowpass(v.q_m, fs_hz, 20.0), fs_hz)[1], fs_hz, 20.0) for jn, v in validation.items()}
           if validation is not None else None)
+    if vq is not None and robot is not None:
+        vq[ROBOT_KEY] = robot_context(robot, validation, nominal)
     held = {}
 
     def held_out(jn):
@@ -574,8 +584,13 @@ def discover(signals: dict, models: dict, *, fs_hz: float, validation: dict | No
                for f in fams.values()):
             stop = "the residuals are white"
             break
-        tried = [e for e in effects if not any(f["name"] == e for f in found)]
-        results = _search(fams, qdd, names, tried, holdout, skip=banned)
+        if robot is None:
+            tried, skip = [e for e in effects if not any(f["name"] == e for f in found)], banned
+        else:
+            # a robot's joints each have their own drivetrain, and share the recording's clock: an
+            # effect found on one joint is still looked for on the others
+            tried, skip = list(effects), banned | {(f["joint"], f["name"]) for f in found}
+        results = _search(fams, qdd, names, tried, holdout, skip=skip)
         if not results:
             stop = "no effect of the library applies"
             break
@@ -615,7 +630,7 @@ def discover(signals: dict, models: dict, *, fs_hz: float, validation: dict | No
                           "p_value": min(1.0, 2.0 * min(win.score["p_value"] * n_tests, p_oe)),
                           "runner_up": sorted(((j.candidate.name, j.gain) for j in judged if j is not win),
                                               key=lambda x: -x[1])[:3]})
-            fams, qdd = _families_all(current, signals, fs_hz)
+            fams, qdd = _families_all(current, signals, fs_hz, ctx)
             continue
         # the search alone (simulate=False): the clearest significant effect, by equation error
         sig = sorted((x for x in results if x[2]["explained_Nm"] >= floor[x[0]] and x[2]["p_value"] * n_tests < alpha),
@@ -634,7 +649,7 @@ def discover(signals: dict, models: dict, *, fs_hz: float, validation: dict | No
                       "p_value": min(1.0, score["p_value"] * n_tests),
                       "runner_up": sorted(((c.name, s["explained_Nm"]) for j, c, s in results if j == jn and c.name != cand.name),
                                           key=lambda x: -x[1])[:3]})
-        fams, qdd = _families_all(current, signals, fs_hz)
+        fams, qdd = _families_all(current, signals, fs_hz, ctx)
     else:
         stop = "every further significant effect was rejected (see rejected)"
     reidentified = {}
@@ -645,7 +660,7 @@ def discover(signals: dict, models: dict, *, fs_hz: float, validation: dict | No
             reidentified[jn] = _reidentification(jn, signals[jn], nominal[jn], current, found, rejected, held_out,
                                                  validation is not None and jn in validation, holdout,
                                                  {k: v for k, v in qdd.items() if k != jn})
-        fams, qdd = _families_all(current, signals, fs_hz)
+        fams, qdd = _families_all(current, signals, fs_hz, ctx)
     effects_out, fit_before, fit_after, fits, residuals = [], {}, {}, {}, {}
     val = None
     if simulate:

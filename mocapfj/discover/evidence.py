@@ -24,7 +24,7 @@ import numpy as np
 from ..dynamics import JointModel
 from ..types import JointSignals
 from .compare import in_band, fit_change_sd
-from .model import OutputError, coupling_input, predict, simulate_joint
+from .model import OutputError, coupling_input, link_context, predict, simulate_joint
 
 __all__ = ["Evidence", "Score"]
 
@@ -109,7 +109,8 @@ class Evidence:
         simulated (an element that overflows, a stiff model past its budget)."""
         try:
             with np.errstate(over="ignore", invalid="ignore"):
-                q_sim, u_sim = predict(model, self.t, self.q, self.q_m, coupling_input(model, self.others))
+                q_sim, u_sim = predict(model, self.t, self.q, self.q_m, coupling_input(model, self.others),
+                                       context=link_context(model, self.others))
         except (RuntimeError, FloatingPointError, ValueError, ArithmeticError, np.linalg.LinAlgError):
             return None
         return self.q_m - q_sim, u_sim

@@ -13,6 +13,12 @@ center_rad, half_range_rad},
 A scenario file (``mocapfj.scenario/1``) is read as a model file too, without its effects: the
 simulation a lab compares its robot with.
 
+The joints of a URDF robot (:mod:`.context`): a top-level ``urdf`` (the file's path, relative to
+the model file) and, per joint, ``urdf_joint`` (its name in the URDF, default the joint's name);
+every moving joint of the URDF has a table, I, mglx and mgly are optional there (default 0) and
+added to the link's inertia and gravity from the URDF. A scenario with ``robot.model = "urdf"``
+is read so, its URDF built from the scenario.
+
 Output-error simulation: the link is driven by the recorded motor angle (the motor's position
 loop is stiff: :class:`mocapfj.dynamics.PrescribedMotor`), with `mocapfj.dynamics.simulate`; it
 gives the link angle, the deflection and the motor torque the model needs for that motion.
@@ -31,20 +37,24 @@ from ..errors import InputError
 from ..io.tomlio import describe, read_toml, require, write_toml
 from .memo import by_content
 
-__all__ = ["JointModel", "read_model_file", "write_model_file", "fit_pct", "simulate_joint", "OutputError"]
+__all__ = ["JointModel", "read_model_file", "write_model_file", "fit_pct", "simulate_joint", "OutputError", "link_context"]
 
 MODEL_FORMAT = "mocapfj.model/1"
 
 
-def _joint_from_table(tab: dict, path, i: int) -> JointModel:
+def _joint_from_table(tab: dict, path, i: int, in_robot: bool = False) -> JointModel:
     w = f"joints[{i}]"
     name = require(path, tab, "name", str, w)
     w = f"joints[{name}]"
-    num = {k: float(require(path, tab, k, (int, float), w)) for k in ("I", "J", "mglx", "mgly", "b")}
+    # a robot's joint: the URDF gives the link's inertia and gravity, these are added to them
+    own = ("I", "mglx", "mgly") if in_robot else ()
+    num = {k: float(require(path, tab, k, (int, float), w, **({"default": 0.0} if k in own else {})))
+           for k in ("I", "J", "mglx", "mgly", "b")}
     for k, v in num.items():
-        ok = np.isfinite(v) and (v > 0 if k in ("I", "J") else v >= 0 if k == "b" else True)
+        ok = np.isfinite(v) and (v > 0 if k in ("I", "J") and k not in own else v >= 0 if k in ("b", "I") else True)
         if not ok:
-            what = "positive" if k in ("I", "J") else "non-negative" if k == "b" else "finite"
+            what = ("positive" if k in ("I", "J") and k not in own else "non-negative" if k in ("b", "I")
+                    else "finite")
             raise InputError(path, f"{w}.{k}", f"a {what}, finite number", v)
     gear = float(require(path, tab, "gear_ratio", (int, float), w, default=1.0))
     if not (np.isfinite(gear) and gear > 0):
@@ -73,8 +83,31 @@ def _joint_from_table(tab: dict, path, i: int) -> JointModel:
                       coupling=coupling, **num)
 
 
+def _scenario_robot(path: Path, doc: dict):
+    """The robot of a scenario file whose ``robot.model`` is "urdf" (its URDF text), else None."""
+    robot = doc.get("robot")
+    if not (isinstance(robot, dict) and robot.get("model") == "urdf"):
+        return None
+    from ..synth.record import scenario_urdf
+    from ..synth.scenario import load_scenario
+    from .context import Robot, urdf_joint_names
+
+    scn = load_scenario(path)
+    try:
+        urdf = scenario_urdf(scn)
+    except ValueError as e:
+        raise InputError(path, "joints", "the URDF joints in PA-10 order", str(e)) from None
+    names = urdf_joint_names(urdf)
+    return Robot(urdf=urdf, joints=names, urdf_joints=names)
+
+
 def read_model_file(path: str | Path) -> dict[str, JointModel]:
-    """Joint models by name from a model file, or from a scenario file without its effects."""
+    """Joint models by name from a model file, or from a scenario file without its effects.
+
+    A top-level ``urdf`` (a path relative to the file) makes the joints those of a URDF robot
+    (:mod:`.context`): each joint's ``urdf_joint`` (default its name) names its URDF joint, every
+    moving joint of the URDF has one table, and I, mglx, mgly are optional (default 0), added to
+    the robot's own terms. A scenario whose ``robot.model`` is "urdf" is read the same way."""
     path = Path(path)
     doc = read_toml(path)
     fmt = doc.get("format")
@@ -83,8 +116,17 @@ def read_model_file(path: str | Path) -> dict[str, JointModel]:
     joints = doc.get("joints")
     if not isinstance(joints, list) or not joints:
         raise InputError(path, "joints", "one [[joints]] table per joint", describe(joints))
+    robot = None
+    if fmt == MODEL_FORMAT and "urdf" in doc:
+        from .context import robot_from_table
+
+        if not all(isinstance(t, dict) for t in joints):
+            raise InputError(path, "joints", "one [[joints]] table per joint", describe(joints))
+        robot = robot_from_table(doc, path, [str(t.get("name", "")) for t in joints], joints)
+    elif fmt != MODEL_FORMAT:
+        robot = _scenario_robot(path, doc)
     try:
-        models = [_joint_from_table(t, path, i) for i, t in enumerate(joints)]
+        models = [_joint_from_table(t, path, i, robot is not None) for i, t in enumerate(joints)]
     except InputError as e:
         if e.file == "<argument>":              # a model element's own check: name this file
             raise InputError(path, e.field, e.expected, e.got, e.hint) from None
@@ -93,12 +135,27 @@ def read_model_file(path: str | Path) -> dict[str, JointModel]:
     if len(set(names)) != len(names):
         raise InputError(path, "joints.name", "one table per joint", f"{sorted({n for n in names if names.count(n) > 1})} "
                          "more than once")
+    if robot is not None:
+        models = [m.with_(robot=robot) for m in models]
     return {m.name: m for m in models}
 
 
 def write_model_file(path: str | Path, models, effects: list[dict] | None = None) -> None:
-    """Write joint models (and, for the record, the effects that made them) atomically."""
+    """Write joint models (and, for the record, the effects that made them) atomically. A robot's
+    URDF is named by its absolute path, or, given as text, written next to the file
+    (``<stem>.urdf``)."""
+    from ..io import write_text_atomic
+
+    models = list(models)
     doc = {"format": MODEL_FORMAT, "joints": [m.to_table() for m in models]}
+    robots = {m.robot for m in models if m.robot is not None}
+    if robots:
+        urdf = next(iter(robots)).urdf
+        if urdf.lstrip().startswith("<"):
+            target = Path(path).with_suffix(".urdf")
+            write_text_atomic(target, urdf)
+            urdf = target.name
+        doc = {"format": MODEL_FORMAT, "urdf": urdf, "joints": doc["joints"]}
     if effects:
         doc["discovered"] = effects
     write_toml(path, doc)
@@ -252,17 +309,67 @@ def coupling_input(model: JointModel, others_qdd: dict | None) -> np.ndarray | N
     return -sum(c * np.asarray(others_qdd[s]) for s, c in model.coupling.items())
 
 
-def predict(model: JointModel, t, q, q_m, ext=None, *, rtol: float = 1e-4, atol: float = 1e-7):
+def link_context(model: JointModel, others: dict | None):
+    """The :class:`.context.LinkContext` of a robot's joint from the other joints' map (its
+    :data:`.context.ROBOT_KEY` entry), None for a single joint."""
+    if model.robot is None:
+        return None
+    from .context import ROBOT_KEY
+
+    ctx = (others or {}).get(ROBOT_KEY)
+    if ctx is None or model.name not in ctx.links:
+        raise InputError(None, f"joints[{model.name}].urdf_joint", "the robot's other joints in the recording",
+                         "no robot context")
+    return ctx.of(model.name)
+
+
+def _robot_link(model: JointModel, t, q, drive, ext, context, d_span: float):
+    """(q_sim, u_sim) (T,) of a robot's joint (:mod:`.context`) by the compiled link kernel, its
+    inertia, gravity and the other links' torque from `context` (a LinkContext at the samples of
+    t), plus the coupling torque `ext` and a position torque at the recorded link angle q.
+    RuntimeError for an element the kernel does not run."""
+    from ..dynamics.link_forward import encode_friction, encode_spring, link_forward
+
+    fs = 1.0 / float(np.median(np.diff(t)))
+    if np.abs(np.diff(t) * fs - 1.0).max() > 1e-6:
+        raise RuntimeError("a robot's joint is simulated on uniform samples only")
+    if encode_friction(model.friction) is None or encode_spring(model.spring) is None:
+        raise RuntimeError(f"a robot's joint with {type(model.friction).__name__} friction and a "
+                           f"{type(model.spring).__name__} spring is not simulated (mocapfj.dynamics.link_forward)")
+    I_t, gx, gy, tau = context.arrays()
+    if ext is not None:
+        tau = tau + ext
+    if model.position_torque is not None:
+        tau = tau + model.position_torque.torque(np.asarray(q, dtype=np.float64))
+    qd, qdd = _spline_rates(t, drive)
+    # the static state at the start under the first sample's context
+    sj = model.with_(I=float(model.I + I_t[0]), mglx=float(model.mglx + gx[0]), mgly=float(model.mgly + gy[0]),
+                     position_torque=None).single_joint(smoothing=1e-6)
+    q0 = float(sj.static_link_angle(np.array([drive[0]]))[0]) + float(tau[0]) / model.stiffness()
+    q_sim, _, tau_s = link_forward(drive, fs, I=model.I, mglx=model.mglx, mgly=model.mgly, friction=model.friction,
+                                   spring=model.spring, transmission_error=model.transmission_error, qd_m=qd, q0=q0,
+                                   d_span=d_span, context=(I_t, gx, gy, tau))
+    gain = 1.0 if model.transmission_error is None else 1.0 + model.transmission_error.derivative(drive)
+    return q_sim, (model.J * qdd + model.b * qd + gain * tau_s) / model.torque_gain
+
+
+def predict(model: JointModel, t, q, q_m, ext=None, *, rtol: float = 1e-4, atol: float = 1e-7, context=None):
     """(q_sim, u_sim) (T,): the link angle on the mocap clock (the model's delay applied) and the
     motor torque the model predicts when its link is driven by the recorded motor angle, Wiener-
     filtered (:func:`mocapfj.ident.output_error.wiener_drive`). ext : (T,) N m, the coupling torque
-    (:func:`coupling_input`) or None. A compiled kernel when the model is one it runs, else
-    :func:`mocapfj.dynamics.simulate` on a budget of 20 derivative evaluations per sample (raises
-    RuntimeError beyond it)."""
+    (:func:`coupling_input`) or None. context : a robot joint's :class:`.context.LinkContext` at
+    the samples of t (:func:`link_context`), or None for a single joint. A compiled kernel when
+    the model is one it runs, else :func:`mocapfj.dynamics.simulate` on a budget of 20
+    derivative evaluations per sample (raises RuntimeError beyond it)."""
     fs = 1.0 / float(np.median(np.diff(t)))
     # the motor angle drives the link without the encoder noise that would ring it where the real
     # link, driven by the true motion, does not (mocapfj.ident.output_error.wiener_drive)
     drive = _wiener_drive(q_m, fs)
+    if context is not None:
+        q_sim, u_sim = _robot_link(model, t, q, drive, ext, context, 2.0 * float(np.nanmax(np.abs(q_m - q))))
+        if model.delay_s:
+            q_sim = shift_signal(t, q_sim, -model.delay_s)
+        return q_sim, u_sim
     fast = _plain_link(model, t, drive, 2.0 * float(np.nanmax(np.abs(q_m - q)))) if ext is None else None
     if fast is not None:
         q_sim, u_sim = fast
@@ -285,7 +392,8 @@ def simulate_joint(model: JointModel, t, q, q_m, u, others_qdd: dict | None = No
     """Simulate `model` driven by the recorded motor angle and compare with the recording.
 
     t, q, q_m, u : (T,) on one clock (s, rad, rad, N m); others_qdd : {joint: (T,) rad/s^2} the
-    other joints' link accelerations, for the model's coupling terms. The delay of the model
+    other joints' link accelerations, for the model's coupling terms, and for a robot's joint
+    the :class:`.context.RobotContext` (key :data:`.context.ROBOT_KEY`). The delay of the model
     shifts the simulated link angle onto the mocap samples. `trim_s` at both ends is left out
     of the fits (the simulation starts from the static state). period_s : the excitation's period
     for the noise floor; "auto" finds it in q_m (:func:`.compare.excitation_period_s`), None: none.
@@ -297,7 +405,8 @@ def simulate_joint(model: JointModel, t, q, q_m, u, others_qdd: dict | None = No
     t, q, q_m, u = (np.asarray(a, dtype=np.float64) for a in (t, q, q_m, u))
     fs = 1.0 / float(np.median(np.diff(t)))
     ext = coupling_input(model, others_qdd)
-    q_sim, u_sim = predict(model, t, q, q_m, ext, rtol=rtol, atol=atol)
+    ctx = link_context(model, others_qdd)
+    q_sim, u_sim = predict(model, t, q, q_m, ext, rtol=rtol, atol=atol, context=ctx)
     d_rec, d_sim = q_m - q, q_m - q_sim
     keep = (t >= t[0] + trim_s) & (t <= t[-1] - trim_s) & np.isfinite(d_sim)
     r_d = np.full_like(t, np.nan)
@@ -313,7 +422,8 @@ def simulate_joint(model: JointModel, t, q, q_m, u, others_qdd: dict | None = No
     # slope over +-10 mrad can be 100x its slope over the 0.2 mrad a light joint deflects)
     if band_hz is None:
         lo, hi = np.nanpercentile(d_sim[keep], [1.0, 99.0]) if keep.any() else (-0.01, 0.01)
-        band = comparison_band_hz(model.stiffness(lo, hi) if hi - lo > 1e-7 else model.stiffness(), model.I, fs)
+        inertia = model.I if ctx is None else model.I + float(np.mean(ctx.I))      # a robot's link: its mean
+        band = comparison_band_hz(model.stiffness(lo, hi) if hi - lo > 1e-7 else model.stiffness(), inertia, fs)
     else:
         band = float(band_hz)
     inner = (t >= t[0] + trim_s) & (t <= t[-1] - trim_s)

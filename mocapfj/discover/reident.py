@@ -19,6 +19,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..errors import InputError
 from ..dynamics import JointModel
 from ..types import JointSignals
 
@@ -110,6 +111,9 @@ def reidentify(s: JointSignals, nominal: JointModel) -> Reidentified:
     when the signals cannot be identified (too short, non-physical)."""
     from ..ident.joint import identify_signals
 
+    if nominal.robot is not None:
+        raise InputError(None, f"model.joints[{nominal.name}]", "a single joint (the re-identification of a URDF "
+                         "robot's joint in its context is not implemented)", "a joint of a URDF robot")
     full = identify_signals(s, gear_ratio=nominal.gear_ratio, spring_models=("linear", "cubic", "bouc_wen"),
                             fit_clock_offset=True)
     effects = _effects_of(full, s)

@@ -93,9 +93,15 @@ class Families:
         return self.lp(self.tau_s - spring_torque_of(self.model, delta + self.q_zero_rad, self.t))
 
 
-def _link_torque(model: JointModel, q, qd, qdd) -> np.ndarray:
-    """I q'' + G(q) + F(q, q') - tau_pos(q), N m (docs/conventions.md signs)."""
-    tau = model.I * qdd + model.single_joint().gravity(q) + model.friction.torque(qd, q)
+def _link_torque(model: JointModel, q, qd, qdd, context=None) -> np.ndarray:
+    """I q'' + G(q) + F(q, q') - tau_pos(q), N m (docs/conventions.md signs); a robot's joint
+    (context: its :class:`.context.LinkContext`) adds the robot's inertia and gravity and takes off
+    the other links' torque."""
+    if context is None:
+        tau = model.I * qdd + model.single_joint().gravity(q) + model.friction.torque(qd, q)
+    else:      # the joint's own I (>= 0), mglx, mgly are added to the robot's
+        tau = ((model.I + context.I) * qdd - (model.mglx + context.mglx) * np.sin(q)
+               + (model.mgly + context.mgly) * np.cos(q) + model.friction.torque(qd, q) - context.tau)
     if model.position_torque is not None:
         tau = tau - model.position_torque.torque(q)
     return tau
@@ -103,7 +109,9 @@ def _link_torque(model: JointModel, q, qd, qdd) -> np.ndarray:
 
 def families(model: JointModel, t, q, q_m, u, *, fs_hz: float, others_qdd: dict | None = None,
              trim_s: float = 1.0) -> Families:
-    """The spring and link residuals of `model` on one joint's recorded signals (mocap clock)."""
+    """The spring and link residuals of `model` on one joint's recorded signals (mocap clock).
+    others_qdd : {joint: (T,) rad/s^2} the other joints' accelerations (the model's coupling
+    terms) and, for a robot's joint, the robot's context (:data:`.context.ROBOT_KEY`)."""
     t, q, q_m, u = (np.asarray(a, dtype=np.float64) for a in (t, q, q_m, u))
     if not (t.shape == q.shape == q_m.shape == u.shape and t.ndim == 1):
         raise InputError(None, "t, q, q_m, u", "four (T,) arrays", [a.shape for a in (t, q, q_m, u)])
@@ -143,7 +151,9 @@ def families(model: JointModel, t, q, q_m, u, *, fs_hz: float, others_qdd: dict 
     d_hat = complementary(delta + e, d_lin, fs_hz, SPLIT_HZ)
     q_hat = qmf - d_hat
     qd, qdd = derivatives(q_hat, fs_hz)
-    link = _link_torque(model, q_hat, qd, qdd)
+    from .model import link_context
+
+    link = _link_torque(model, q_hat, qd, qdd, link_context(model, others_qdd))
     for src, c in model.coupling.items():
         if others_qdd is None or src not in others_qdd:
             raise InputError(None, f"joints[{model.name}].coupling", "source joints in the recording", src)

@@ -27,7 +27,9 @@ class JointModel:
     :mod:`.friction` model), spring (a :mod:`.springs` or :mod:`.hysteresis` element);
     transmission_error, position_torque (a balancer or gravity-model correction), torque_gain
     (actual / logged torque), delay_s (the mocap samples are this late on the controller clock),
-    coupling {source joint: inertia kg m^2}.
+    coupling {source joint: inertia kg m^2}; robot: the URDF robot the joint belongs to
+    (:class:`mocapfj.discover.context.Robot`) or None: the link's inertia, gravity and the other
+    links' torques then come from the robot, I, mglx and mgly being added to them.
     """
 
     name: str
@@ -44,6 +46,7 @@ class JointModel:
     torque_gain: float = 1.0
     delay_s: float = 0.0
     coupling: dict = field(default_factory=dict)
+    robot: object = None
 
     def single_joint(self, smoothing: float = 1e-3) -> SingleJoint:
         """The dynamics model. A friction law with its own smoothing (a tanh law, eps > 0) keeps it;
@@ -78,6 +81,8 @@ class JointModel:
             out["delay_s"] = self.delay_s
         if self.coupling:
             out["coupling"] = dict(self.coupling)
+        if self.robot is not None:
+            out["urdf_joint"] = self.robot.urdf_joints[self.robot.joints.index(self.name)]
         return out
 
     def with_(self, **changes) -> "JointModel":

@@ -153,7 +153,8 @@ def _te_value_py(qm, N, amps, phases, orders):  # pragma: no cover - compiled
         s += amps[j] * math.sin(orders[j] * N * qm + phases[j])
     return s
 
-def _run_py(q_m, qd_m, dt, n_sub, I, mglx, mgly, fr, kind, P, gap, N, amps, phases, orders, q0, w0):  # pragma: no cover
+def _run_py(q_m, qd_m, dt, n_sub, I, mglx, mgly, fr, kind, P, gap, N, amps, phases, orders, q0, w0,
+            ctx, cI, cgx, cgy, cex):  # pragma: no cover
     T = q_m.shape[0]
     q_out = np.empty(T)
     w_out = np.empty(T)
@@ -161,7 +162,10 @@ def _run_py(q_m, qd_m, dt, n_sub, I, mglx, mgly, fr, kind, P, gap, N, amps, phas
     h = dt / n_sub
     eps = fr[9]
     expo = fr[8]
-    if eps > 0.0 and h * max(fr[0] + fr[4], fr[1] + fr[5]) > eps * I:
+    I_min = I
+    if ctx:
+        I_min = I + cI.min()
+    if eps > 0.0 and h * max(fr[0] + fr[4], fr[1] + fr[5]) > eps * I_min:
         eps = 0.0                                # stiffer than the step resolves: sign
     bw = kind == 2
     q = q0
@@ -172,6 +176,10 @@ def _run_py(q_m, qd_m, dt, n_sub, I, mglx, mgly, fr, kind, P, gap, N, amps, phas
     q_out[0] = q
     w_out[0] = w
     tau_out[0] = _spring_torque(kind, P, gap, dl0, z)
+    Ii = I
+    gx = mglx
+    gy = mgly
+    tx = 0.0
     for i in range(1, T):
         a = q_m[i - 1]
         b = q_m[i]
@@ -181,6 +189,11 @@ def _run_py(q_m, qd_m, dt, n_sub, I, mglx, mgly, fr, kind, P, gap, N, amps, phas
             x = (s + 0.5) / n_sub
             x2 = x * x
             x3 = x2 * x
+            if ctx:                              # the robot's terms, linear within the sample
+                Ii = I + cI[i - 1] + x * (cI[i] - cI[i - 1])
+                gx = mglx + cgx[i - 1] + x * (cgx[i] - cgx[i - 1])
+                gy = mgly + cgy[i - 1] + x * (cgy[i] - cgy[i - 1])
+                tx = cex[i - 1] + x * (cex[i] - cex[i - 1])
             qm = ((2 * x3 - 3 * x2 + 1) * a + (x3 - 2 * x2 + x) * ma + (-2 * x3 + 3 * x2) * b + (x3 - x2) * mb)
             qmt = qm + _te_value(qm, N, amps, phases, orders)
             qmid = q + 0.5 * h * w
@@ -189,10 +202,12 @@ def _run_py(q_m, qd_m, dt, n_sub, I, mglx, mgly, fr, kind, P, gap, N, amps, phas
                 de = _engaged(dl, gap)
                 z = _bouc_wen_step(z, d_prev, de, P[2], P[3], P[4])
                 d_prev = de
-            F = _spring_torque(kind, P, gap, dl, z) + mglx * math.sin(qmid) - mgly * math.cos(qmid)
-            p = I * w + h * F                    # momentum without friction
+            F = _spring_torque(kind, P, gap, dl, z) + gx * math.sin(qmid) - gy * math.cos(qmid)
+            if ctx:
+                F += tx
+            p = Ii * w + h * F                   # momentum without friction
             if eps > 0.0:
-                # I w1 + h fr((w + w1) / 2) = p, fr(x) = C(x) tanh(x / eps) + V(x) x: Newton
+                # Ii w1 + h fr((w + w1) / 2) = p, fr(x) = C(x) tanh(x / eps) + V(x) x: Newton
                 w1 = w
                 for _ in range(60):
                     wf = 0.5 * (w + w1)
@@ -204,10 +219,10 @@ def _run_py(q_m, qd_m, dt, n_sub, I, mglx, mgly, fr, kind, P, gap, N, amps, phas
                     if fr[4 + j] != 0.0 and wf != 0.0:
                         dC = -fr[4 + j] * ex * expo * r / wf
                     th = math.tanh(wf / eps)
-                    g = I * w1 + h * (C * th + fr[2 + j] * wf) - p
-                    dg = I + 0.5 * h * (C * (1.0 - th * th) / eps + fr[2 + j] + dC * th)
-                    if dg < 0.5 * I:
-                        dg = 0.5 * I
+                    g = Ii * w1 + h * (C * th + fr[2 + j] * wf) - p
+                    dg = Ii + 0.5 * h * (C * (1.0 - th * th) / eps + fr[2 + j] + dC * th)
+                    if dg < 0.5 * Ii:
+                        dg = 0.5 * Ii
                     dw1 = g / dg
                     w1 -= dw1
                     if abs(dw1) <= 1e-12 * (abs(w1) + eps):
@@ -218,7 +233,7 @@ def _run_py(q_m, qd_m, dt, n_sub, I, mglx, mgly, fr, kind, P, gap, N, amps, phas
                 sg = 1.0 if w > 0.0 else -1.0
                 j = 0 if w > 0.0 else 1
                 C = fr[j] + fr[4 + j] * math.exp(-(abs(w) / fr[6 + j]) ** expo)
-                mass = I + 0.5 * h * fr[2 + j]
+                mass = Ii + 0.5 * h * fr[2 + j]
                 w1 = (p - 0.5 * h * fr[2 + j] * w - sg * h * C) / mass
                 if w1 * sg >= 0.0:               # slides one way all along
                     q = qmid + 0.5 * h * w1
@@ -227,8 +242,10 @@ def _run_py(q_m, qd_m, dt, n_sub, I, mglx, mgly, fr, kind, P, gap, N, amps, phas
                     frac = w / (w - w1)
                     h2 = h * (1.0 - frac)
                     q_stop = q + 0.5 * h * frac * w
-                    F2 = (_spring_torque(kind, P, gap, qmt - q_stop, z) + mglx * math.sin(q_stop)
-                          - mgly * math.cos(q_stop))
+                    F2 = (_spring_torque(kind, P, gap, qmt - q_stop, z) + gx * math.sin(q_stop)
+                          - gy * math.cos(q_stop))
+                    if ctx:
+                        F2 += tx
                     j2 = 0 if F2 > 0.0 else 1
                     static = fr[j2] + fr[4 + j2]
                     if abs(F2) <= static:        # sticks
@@ -236,14 +253,14 @@ def _run_py(q_m, qd_m, dt, n_sub, I, mglx, mgly, fr, kind, P, gap, N, amps, phas
                         q = q_stop
                     else:                        # turns: the friction flips at the stop
                         sg2 = 1.0 if F2 > 0.0 else -1.0
-                        w = h2 * (F2 - sg2 * static) / (I + 0.5 * h2 * fr[2 + j2])
+                        w = h2 * (F2 - sg2 * static) / (Ii + 0.5 * h2 * fr[2 + j2])
                         q = q_stop + 0.5 * h2 * w
             else:                                # at rest: sticks or breaks away
                 j = 0 if F > 0.0 else 1
                 static = fr[j] + fr[4 + j]
                 if abs(F) > static:
                     sg = 1.0 if F > 0.0 else -1.0
-                    w = h * (F - sg * static) / (I + 0.5 * h * fr[2 + j])
+                    w = h * (F - sg * static) / (Ii + 0.5 * h * fr[2 + j])
                     q = q + 0.5 * h * w
         q_out[i] = q
         w_out[i] = w
@@ -274,14 +291,21 @@ def _kernel():
 
 def link_forward(q_m, fs_hz: float, *, I: float, mglx: float, mgly: float, friction, spring,
                  transmission_error: TransmissionError | None = None, qd_m=None, q0: float, w0: float | None = None,
-                 d_span: float = 0.0, max_phase: float = 0.05):
+                 d_span: float = 0.0, max_phase: float = 0.05, context=None):
     """(q (T,) rad, q' (T,) rad/s, tau_s (T,) N m) of the link under the motor angle q_m (T,) rad
     sampled at fs_hz, starting at q0 (a static equilibrium: ``SingleJoint.static_link_angle``)
     with velocity w0 (default the motor's) and a virgin spring state. `friction` and `spring` are
     elements of :mod:`.friction` and :mod:`.springs` / :mod:`.hysteresis` (module docstring for
     the ones it runs); `d_span` rad bounds the deflections met (the spring's largest slope
     up to it sets the substeps, :func:`.link_response.substeps`). Raises InputError for an element it does
-    not run and RuntimeError when the integration leaves the finite numbers."""
+    not run and RuntimeError when the integration leaves the finite numbers.
+
+    context : (I_t, mglx_t, mgly_t, tau_t), each (T,) at the samples of q_m, or None: the link of a
+    robot (:mod:`mocapfj.discover.context`). The link's inertia is then I + I_t (kg m^2), its
+    gravity terms mglx + mglx_t, mgly + mgly_t (N m), and tau_t N m acts on it besides (the other
+    links' inertial and Coriolis torques), each linear between samples:
+    (I + I_t) q'' = tau_s - F(q') + (mglx + mglx_t) sin q - (mgly + mgly_t) cos q + tau_t.
+    Without it the kernel runs exactly as before (no term is added)."""
     q_m = np.ascontiguousarray(q_m, dtype=np.float64)
     if q_m.ndim != 1 or q_m.size < 3 or not np.isfinite(q_m).all():
         raise InputError(None, "q_m", "a finite (T,) motor angle with T >= 3", q_m.shape)
@@ -289,8 +313,16 @@ def link_forward(q_m, fs_hz: float, *, I: float, mglx: float, mgly: float, frict
     if fr is None or sp is None:
         raise InputError(None, "friction/spring", "elements link_forward runs (mocapfj.dynamics.link_forward)",
                          f"{type(friction).__name__}, {type(spring).__name__}")
-    if not (I > 0 and math.isfinite(I) and math.isfinite(mglx) and math.isfinite(mgly) and math.isfinite(q0)):
-        raise InputError(None, "I, mglx, mgly, q0", "finite numbers, I > 0", (I, mglx, mgly, q0))
+    if context is None:
+        ctx, cI, cgx, cgy, cex, I_min = False, np.zeros(1), np.zeros(1), np.zeros(1), np.zeros(1), I
+    else:
+        cI, cgx, cgy, cex = (np.ascontiguousarray(a, dtype=np.float64) for a in context)
+        if not all(a.shape == q_m.shape and np.isfinite(a).all() for a in (cI, cgx, cgy, cex)):
+            raise InputError(None, "context", f"four finite {q_m.shape} arrays (inertia, mglx, mgly, torque)",
+                             [a.shape for a in (cI, cgx, cgy, cex)])
+        ctx, I_min = True, float(I + cI.min())
+    if not (I_min > 0 and math.isfinite(I) and math.isfinite(mglx) and math.isfinite(mgly) and math.isfinite(q0)):
+        raise InputError(None, "I, mglx, mgly, q0", "finite numbers, I > 0", (I_min, mglx, mgly, q0))
     kind, P, gap = sp
     qd_m = np.gradient(q_m) * fs_hz if qd_m is None else np.ascontiguousarray(qd_m, dtype=np.float64)
     dt = 1.0 / fs_hz
@@ -306,13 +338,14 @@ def link_forward(q_m, fs_hz: float, *, I: float, mglx: float, mgly: float, frict
                                    np.asarray(te.phases, dtype=np.float64), np.asarray(te.orders, dtype=np.float64))
     else:
         N, amps, phases, orders = 1.0, np.zeros(0), np.zeros(0), np.zeros(0)
-    n_sub = substeps(I, k, dt, max_phase)
+    n_sub = substeps(I_min, k, dt, max_phase)
     if amps.size:
         # the transmission error's fastest order advances at most 0.5 rad per substep
         rate = float(np.max(np.abs(orders)) * N * np.max(np.abs(qd_m)))
         n_sub = max(n_sub, int(math.ceil(rate * dt / 0.5)))
     q, w, tau = _kernel()(q_m, qd_m, dt, n_sub, float(I), float(mglx), float(mgly), fr, int(kind), P, float(gap), N,
-                          amps, phases, orders, float(q0), float(qd_m[0] if w0 is None else w0))
+                          amps, phases, orders, float(q0), float(qd_m[0] if w0 is None else w0), ctx, cI, cgx, cgy,
+                          cex)
     if not (np.isfinite(q).all() and np.isfinite(tau).all()):
         raise RuntimeError("the link simulation left the finite numbers (a spring or friction law without a "
                            "stable motion under this motor trajectory)")
