@@ -149,7 +149,7 @@ def link_motion(robot: Robot, signals: dict, models: dict) -> tuple[np.ndarray, 
     motion from its motor's (the nominal models: the context is the recording's, fixed while
     discovery changes the models)."""
     from ..ident.conditioning import derivatives, lowpass
-    from .model import _spline_rates, _wiener_drive
+    from .memo import spline_rates, wiener_drive_of
     from .residuals import LINK_HZ
 
     missing = [j for j in robot.joints if j not in signals]
@@ -165,8 +165,8 @@ def link_motion(robot: Robot, signals: dict, models: dict) -> tuple[np.ndarray, 
     inner = slice(int(fs), t.size - int(fs))                  # 1 s trims: the filters' ends
     for j, s in enumerate(sig):
         m = models[robot.joints[j]]
-        drive = _wiener_drive(np.asarray(s.q_m, dtype=np.float64), fs)
-        qd_m, qdd_m = _spline_rates(t, drive)
+        drive = wiener_drive_of(np.asarray(s.q_m, dtype=np.float64), fs)
+        qd_m, qdd_m = spline_rates(t, drive)
         tau_s = m.torque_gain * np.asarray(s.u, dtype=np.float64) - m.J * qdd_m - m.b * qd_m
         d_spring = lowpass(tau_s / m.stiffness(), fs, LINK_HZ)
         dd, ddd = derivatives(d_spring, fs)

@@ -19,7 +19,7 @@ from functools import wraps
 
 import numpy as np
 
-__all__ = ["by_content"]
+__all__ = ["by_content", "wiener_drive_of", "spline_rates"]
 
 
 def _key(args, kwargs) -> bytes:
@@ -64,3 +64,21 @@ def by_content(size: int = 16):
         return call
 
     return wrap
+
+
+@by_content()
+def wiener_drive_of(q_m, fs):
+    """The Wiener-filtered motor angle that drives a simulation (:func:`mocapfj.ident.output_error.wiener_drive`),
+    computed once per content."""
+    from ..ident.output_error import wiener_drive
+
+    return wiener_drive(q_m, fs)
+
+
+@by_content()
+def spline_rates(t, drive):
+    """(velocity, acceleration) (T,) of the cubic spline through the drive's samples."""
+    from scipy.interpolate import CubicSpline
+
+    spline = CubicSpline(t, drive)
+    return np.stack([spline(t, 1), spline(t, 2)])

@@ -35,7 +35,7 @@ from ..dynamics import JointModel, PositionTorque, PrescribedMotor, Transmission
 from ..dynamics.spec import FRICTION_MODELS, SPRING_MODELS, element_from_table
 from ..errors import InputError
 from ..io.tomlio import describe, read_toml, require, write_toml
-from .memo import by_content
+from .memo import by_content, spline_rates, wiener_drive_of
 
 __all__ = ["JointModel", "read_model_file", "write_model_file", "fit_pct", "simulate_joint", "OutputError", "link_context"]
 
@@ -261,7 +261,7 @@ def _plain_link(model: JointModel, t, drive, d_span: float):
             return None
     elif encode_friction(fr) is None or encode_spring(sp) is None:
         return None
-    qd, qdd = _spline_rates(t, drive)
+    qd, qdd = spline_rates(t, drive)
     if plain:
         q_sim, _ = link_response(drive, fs, I=model.I, mglx=model.mglx, mgly=model.mgly, c=fr.c, v=fr.v,
                                  k=k, eps=fr.smoothing, k3=k3, qd_m=qd)
@@ -272,22 +272,6 @@ def _plain_link(model: JointModel, t, drive, d_span: float):
                                  transmission_error=model.transmission_error, qd_m=qd, q0=q0, d_span=d_span)
     gain = 1.0 if model.transmission_error is None else 1.0 + model.transmission_error.derivative(drive)
     return q_sim, (model.J * qdd + model.b * qd + gain * tau) / model.torque_gain
-
-
-@by_content()
-def _wiener_drive(q_m, fs):
-    from ..ident.output_error import wiener_drive
-
-    return wiener_drive(q_m, fs)
-
-
-@by_content()
-def _spline_rates(t, drive):
-    """(velocity, acceleration) (T,) of the cubic spline through the drive's samples."""
-    from scipy.interpolate import CubicSpline
-
-    spline = CubicSpline(t, drive)
-    return np.stack([spline(t, 1), spline(t, 2)])
 
 
 @by_content()
@@ -341,7 +325,7 @@ def _robot_link(model: JointModel, t, q, drive, ext, context, d_span: float):
         tau = tau + ext
     if model.position_torque is not None:
         tau = tau + model.position_torque.torque(np.asarray(q, dtype=np.float64))
-    qd, qdd = _spline_rates(t, drive)
+    qd, qdd = spline_rates(t, drive)
     # the static state at the start under the first sample's context
     sj = model.with_(I=float(model.I + I_t[0]), mglx=float(model.mglx + gx[0]), mgly=float(model.mgly + gy[0]),
                      position_torque=None).single_joint(smoothing=1e-6)
@@ -364,7 +348,7 @@ def predict(model: JointModel, t, q, q_m, ext=None, *, rtol: float = 1e-4, atol:
     fs = 1.0 / float(np.median(np.diff(t)))
     # the motor angle drives the link without the encoder noise that would ring it where the real
     # link, driven by the true motion, does not (mocapfj.ident.output_error.wiener_drive)
-    drive = _wiener_drive(q_m, fs)
+    drive = wiener_drive_of(q_m, fs)
     if context is not None:
         q_sim, u_sim = _robot_link(model, t, q, drive, ext, context, 2.0 * float(np.nanmax(np.abs(q_m - q))))
         if model.delay_s:
