@@ -161,14 +161,7 @@ def run_frf(path, out, *, input: str, output: str, reference: str | None = None,
                "model": None if fit is None else fit.to_dict(),
                "modes": [] if fit is None else [m.to_dict() for m in fit.modes],
                "files": {"summary": "frf.json", "frf": "frf.csv"}}
-    out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
-    write_json(out / "frf.json", summary)
-    table = {"f_hz": frf.f_hz, "G_real": frf.G.real, "G_imag": frf.G.imag, "magnitude": frf.magnitude,
-             "phase_rad": frf.phase_rad, "coherence": frf.coherence, "noise": frf.std}
-    if fit is not None:
-        table.update({"model_real": fit.G_fit.real, "model_imag": fit.G_fit.imag})
-    write_csv_columns(out / "frf.csv", table)
+    _write(out, summary, frf, fit)
     return summary
 
 
@@ -203,6 +196,12 @@ def _run_single(path, out, *, input, output, reference, time, model, order, sing
                "frf": r.to_dict(), "model": None if fit is None else fit.to_dict(),
                "modes": [] if fit is None else [m.to_dict() for m in fit.modes],
                "files": {"summary": "frf.json", "frf": "frf.csv"}}
+    _write(out, summary, frf, fit)
+    return summary
+
+
+def _write(out, summary: dict, frf, fit) -> None:
+    """frf.json (the summary) and frf.csv (the FRF per line, and the fitted model's) into `out`."""
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     write_json(out / "frf.json", summary)
@@ -211,4 +210,3 @@ def _run_single(path, out, *, input, output, reference, time, model, order, sing
     if fit is not None:
         table.update({"model_real": fit.G_fit.real, "model_imag": fit.G_fit.imag})
     write_csv_columns(out / "frf.csv", table)
-    return summary
