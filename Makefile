@@ -23,8 +23,10 @@ demo: $(VENV)/.installed
 	$(BIN)/mocapfj demo --out demo_out
 
 # Tests run on every core (pytest-xdist); one BLAS thread per worker avoids oversubscription.
+# --dist loadscope keeps a module's tests on one worker, so its module-scoped recordings are
+# simulated once, not once per worker.
 test: $(VENV)/.installed-test
-	OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 $(BIN)/python -m pytest -q -n auto
+	OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 $(BIN)/python -m pytest -q -n auto --dist loadscope
 
 bench: $(VENV)/.installed-test
 	$(PIP) install -q -e '.[bench]'
