@@ -297,6 +297,42 @@ def _normalized_views(rig: Rig, xy: np.ndarray, valid: np.ndarray, sl: slice, ta
     return feats
 
 
+def _undistort_py(u, v, tx, ty, base, nx, ny, x0, y0, inv, kc, coef):  # pragma: no cover - compiled
+    """One pixel (u, v) to normalised coordinates by a camera's table (as
+    :meth:`UndistortionTable.normalized`): the bilinear residual table (tx, ty from flat index
+    `base`, nx x ny nodes from (x0, y0) at 1 / inv px) plus the approximate inverse (kc: cx, cy,
+    1/fx, 1/fy; coef: k1, k2, k3, p1, p2). (x, y, ok): ok False beyond the table or in a cell it
+    cannot interpolate."""
+    gx = (u - x0) * inv
+    gy = (v - y0) * inv
+    if not (gx >= 0.0 and gx < nx - 1 and gy >= 0.0 and gy < ny - 1):
+        return 0.0, 0.0, False
+    ix = int(gx)
+    iy = int(gy)
+    ax = gx - ix
+    ay = gy - iy
+    i0 = base + iy * nx + ix
+    i2 = i0 + nx
+    a = tx[i0]
+    top = a + ax * (tx[i0 + 1] - a)
+    b = tx[i2]
+    x = top + ay * (b + ax * (tx[i2 + 1] - b) - top)
+    a = ty[i0]
+    top = a + ax * (ty[i0 + 1] - a)
+    b = ty[i2]
+    y = top + ay * (b + ax * (ty[i2 + 1] - b) - top)
+    if not (np.isfinite(x) and np.isfinite(y)):
+        return 0.0, 0.0, False
+    xd = (u - kc[0]) * kc[2]
+    yd = (v - kc[1]) * kc[3]
+    r2 = xd * xd + yd * yd
+    g = 1.0 + r2 * (coef[0] + r2 * (coef[1] + r2 * coef[2]))
+    xy2 = 2.0 * xd * yd
+    x += xd * g + coef[3] * xy2 + coef[4] * (r2 + 2.0 * xd * xd)
+    y += yd * g + coef[3] * (r2 + 2.0 * yd * yd) + coef[4] * xy2
+    return x, y, True
+
+
 def _linear_py(xy, w, use_w, tx, ty, off, nx, ny, x0, y0, inv, kc, coef, G, out, n_views,
                outside):  # pragma: no cover - compiled
     """The linear step of points (compiled by :func:`_linear_kernel`): per point, each finite view
@@ -317,35 +353,10 @@ def _linear_py(xy, w, use_w, tx, ty, off, nx, ny, x0, y0, inv, kc, coef, G, out,
             if not (np.isfinite(u) and np.isfinite(v)):
                 continue
             nv += 1
-            gx = (u - x0[c]) * inv[c]
-            gy = (v - y0[c]) * inv[c]
-            if not (gx >= 0.0 and gx < nx[c] - 1 and gy >= 0.0 and gy < ny[c] - 1):
+            x, y, ok = _undistort(u, v, tx, ty, off[c], nx[c], ny[c], x0[c], y0[c], inv[c], kc[c], coef[c])
+            if not ok:
                 outside[n] = True
                 continue
-            ix = int(gx)
-            iy = int(gy)
-            ax = gx - ix
-            ay = gy - iy
-            i0 = off[c] + iy * nx[c] + ix
-            i2 = i0 + nx[c]
-            a = tx[i0]
-            top = a + ax * (tx[i0 + 1] - a)
-            b = tx[i2]
-            x = top + ay * (b + ax * (tx[i2 + 1] - b) - top)
-            a = ty[i0]
-            top = a + ax * (ty[i0 + 1] - a)
-            b = ty[i2]
-            y = top + ay * (b + ax * (ty[i2 + 1] - b) - top)
-            if not (np.isfinite(x) and np.isfinite(y)):
-                outside[n] = True
-                continue
-            xd = (u - kc[c, 0]) * kc[c, 2]
-            yd = (v - kc[c, 1]) * kc[c, 3]
-            r2 = xd * xd + yd * yd
-            g = 1.0 + r2 * (coef[c, 0] + r2 * (coef[c, 1] + r2 * coef[c, 2]))
-            xy2 = 2.0 * xd * yd
-            x += xd * g + coef[c, 3] * xy2 + coef[c, 4] * (r2 + 2.0 * xd * xd)
-            y += yd * g + coef[c, 3] * (r2 + 2.0 * yd * yd) + coef[c, 4] * xy2
             wt = w[c, n] if use_w else 1.0
             f0 = (x * x + y * y) * wt
             f1 = x * wt
@@ -380,38 +391,24 @@ def _normalized_py(xy, rx, ry, nx, ny, x0, y0, inv, kc, coef, out, redo):  # pra
         out[n, 0] = out[n, 1] = np.nan
         if not (np.isfinite(u) and np.isfinite(v)):
             continue
-        gx = (u - x0) * inv
-        gy = (v - y0) * inv
-        if not (gx >= 0.0 and gx < nx - 1 and gy >= 0.0 and gy < ny - 1):
+        x, y, ok = _undistort(u, v, rx, ry, 0, nx, ny, x0, y0, inv, kc, coef)
+        if not ok:
             redo[n] = True
             continue
-        ix = int(gx)
-        iy = int(gy)
-        ax = gx - ix
-        ay = gy - iy
-        i0 = iy * nx + ix
-        i2 = i0 + nx
-        a = rx[i0]
-        top = a + ax * (rx[i0 + 1] - a)
-        b = rx[i2]
-        x = top + ay * (b + ax * (rx[i2 + 1] - b) - top)
-        a = ry[i0]
-        top = a + ax * (ry[i0 + 1] - a)
-        b = ry[i2]
-        y = top + ay * (b + ax * (ry[i2 + 1] - b) - top)
-        if not (np.isfinite(x) and np.isfinite(y)):
-            redo[n] = True
-            continue
-        xd = (u - kc[0]) * kc[2]
-        yd = (v - kc[1]) * kc[3]
-        r2 = xd * xd + yd * yd
-        g = 1.0 + r2 * (coef[0] + r2 * (coef[1] + r2 * coef[2]))
-        xy2 = 2.0 * xd * yd
-        out[n, 0] = x + xd * g + coef[3] * xy2 + coef[4] * (r2 + 2.0 * xd * xd)
-        out[n, 1] = y + yd * g + coef[3] * (r2 + 2.0 * yd * yd) + coef[4] * xy2
+        out[n, 0] = x
+        out[n, 1] = y
 
 
 _NORMALIZED = None
+_undistort = None       # compiled by _undistort_compiled(): a module global, so numba's disk cache holds
+
+
+def _undistort_compiled():
+    """Compile the one-pixel undistortion both kernels inline (numba imported on first use)."""
+    global _undistort
+    if _undistort is None:
+        from numba import njit
+        _undistort = njit(cache=True, inline="always")(_undistort_py)
 
 
 def _normalized_kernel():
@@ -419,6 +416,7 @@ def _normalized_kernel():
     global _NORMALIZED
     if _NORMALIZED is None:
         from numba import njit
+        _undistort_compiled()
         _NORMALIZED = njit(cache=True, nogil=True)(_normalized_py)
     return _NORMALIZED
 
@@ -433,6 +431,7 @@ def _linear_kernel():
     global _LINEAR
     if _LINEAR is None:
         from numba import njit
+        _undistort_compiled()
         _LINEAR = njit(cache=True, nogil=True)(_linear_py)
     return _LINEAR
 
