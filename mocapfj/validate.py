@@ -23,7 +23,7 @@ import numpy as np
 
 from .errors import InputError
 
-__all__ = ["check_scalar", "check_int", "check_array", "check_unit_vector", "freeze"]
+__all__ = ["check_scalar", "check_int", "check_array", "check_unit_vector", "freeze", "freeze_arrays"]
 
 
 def check_scalar(value, name: str, *, positive: bool = False, nonneg: bool = False, lo: float | None = None,
@@ -126,3 +126,14 @@ def freeze(a: np.ndarray) -> np.ndarray:
     a = np.array(a, copy=True)
     a.setflags(write=False)
     return a
+
+
+def freeze_arrays(obj) -> None:
+    """Replace every numpy array field of the frozen dataclass `obj` by a read-only copy (for its
+    ``__post_init__``)."""
+    from dataclasses import fields
+
+    for f in fields(obj):
+        v = getattr(obj, f.name)
+        if isinstance(v, np.ndarray):
+            object.__setattr__(obj, f.name, freeze(v))

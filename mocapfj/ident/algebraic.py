@@ -35,14 +35,14 @@ The logarithmic decrement, the paper's second estimate, is :mod:`.decrement`.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, fields
+from dataclasses import dataclass
 
 import numpy as np
 from scipy import signal
 from scipy.interpolate import CubicSpline
 
 from ..errors import InputError
-from ..validate import check_array, freeze
+from ..validate import check_array, freeze_arrays
 
 __all__ = ["MIN_FIT_PCT", "SecondOrderEstimate", "SlidingEstimate", "algebraic_estimate", "algebraic_sliding",
            "second_order_response", "quadrature_kernels", "MIN_WINDOW_SAMPLES", "check_segment", "refit_second_order",
@@ -99,10 +99,7 @@ class SecondOrderEstimate:
     link_reversals: int = 0
 
     def __post_init__(self) -> None:
-        for f in fields(self):
-            v = getattr(self, f.name)
-            if isinstance(v, np.ndarray):
-                object.__setattr__(self, f.name, freeze(v))
+        freeze_arrays(self)
 
     @property
     def f0_hz(self) -> float:
@@ -155,10 +152,7 @@ class SlidingEstimate:
     n_valid: int
 
     def __post_init__(self) -> None:
-        for f in fields(self):
-            v = getattr(self, f.name)
-            if isinstance(v, np.ndarray):
-                object.__setattr__(self, f.name, freeze(v))
+        freeze_arrays(self)
 
     def to_dict(self) -> dict:
         return {"window_s": self.window_s, "n_windows": int(self.t_end.size), "n_valid": self.n_valid,

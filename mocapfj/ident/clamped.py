@@ -23,13 +23,13 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass, field, fields
+from dataclasses import dataclass, field
 
 import numpy as np
 
 from ..errors import InputError
 from ..types import LSResult
-from ..validate import check_array, check_scalar, freeze
+from ..validate import check_array, check_scalar, freeze_arrays
 from .conditioning import decimate_parallel, lowpass, resample_to
 from .ls import ls_fit
 
@@ -312,10 +312,7 @@ class ClampedExperiment:
     tau_l: np.ndarray
 
     def __post_init__(self) -> None:
-        for f in fields(self):
-            v = getattr(self, f.name)
-            if isinstance(v, np.ndarray):
-                object.__setattr__(self, f.name, freeze(v))
+        freeze_arrays(self)
 
 
 def simulate_clamped(model, q0, k, rng: np.random.Generator, *, frame: str = "tool", fz_levels=(-1e3, -2e3, -3e3,

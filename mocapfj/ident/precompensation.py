@@ -16,12 +16,12 @@ the resonance.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, fields
+from dataclasses import dataclass
 
 import numpy as np
 
 from ..errors import InputError
-from ..validate import check_array, check_int, check_scalar, freeze
+from ..validate import check_array, check_int, check_scalar, freeze_arrays
 from .algebraic import second_order_response
 
 __all__ = ["Precompensation", "precompensate", "jerk_limited_profile", "deflection_amplitude"]
@@ -56,10 +56,7 @@ class Precompensation:
     method: str = "eq17"
 
     def __post_init__(self) -> None:
-        for f in fields(self):
-            v = getattr(self, f.name)
-            if isinstance(v, np.ndarray):
-                object.__setattr__(self, f.name, freeze(v))
+        freeze_arrays(self)
 
     def to_dict(self) -> dict:
         b = deflection_amplitude(self.predicted_error_before)
