@@ -2,7 +2,7 @@
 the model leaves of them.
 
 Drawn with OpenCV (a dependency of the calibration itself), so a calibration always gets its
-figure; matplotlib is an optional extra of mocapfj.
+figure without the plotting stack.
 """
 
 from __future__ import annotations
