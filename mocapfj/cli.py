@@ -22,7 +22,6 @@ IDENTIFY_METHODS = ("motor_first", "two_step")   # mocapfj.ident.IDENTIFY_METHOD
 PLANNED = [
     ("run", "the whole chain on a recording"),
     ("report", "a readable report of a run"),
-    ("view", "open a run in rerun"),
     ("batch", "run many recordings in parallel"),
 ]
 
@@ -484,6 +483,18 @@ def _cmd_frf(args) -> int:
     return 0
 
 
+def _cmd_view(args) -> int:
+    from .pipeline.view import run_view
+
+    s = run_view(args.run_dir, web=args.web, open_viewer=not args.no_open, magnify=args.magnify, rebuild=args.rebuild)
+    if args.json:
+        _emit(args, s, str)
+    elif args.no_open:
+        print(f"{'built' if s['built'] else 'up to date'}: {s['recording']}\n  open with: " + " ".join(s["command"])
+              + (f"\n  then browse {s['url']}" if s["url"] else ""))
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(
         prog="mocapfj",
@@ -704,6 +715,19 @@ def build_parser() -> argparse.ArgumentParser:
     fr.add_argument("--out", required=True, help="output directory")
     fr.add_argument("--json", action="store_true", help="print a JSON summary on stdout")
     fr.set_defaults(func=_cmd_frf)
+
+    vw = sub.add_parser("view", help="open a run in the rerun viewer (builds RUN_DIR/recording.rrd when missing or older "
+                                     "than the results)")
+    vw.add_argument("run_dir", help="run directory (mocapfj run --out) or one command's --out")
+    vw.add_argument("--web", action="store_true",
+                    help="serve a web viewer over HTTP instead of a window (a headless machine: open the printed URL)")
+    vw.add_argument("--magnify", type=float, default=1.0,
+                    help="also draw the link where it would be with the deflection magnified this many times "
+                         "(rebuilds the recording)")
+    vw.add_argument("--rebuild", action="store_true", help="rebuild the recording even when it is up to date")
+    vw.add_argument("--no-open", action="store_true", help="only build the recording and print the viewer command")
+    vw.add_argument("--json", action="store_true", help="with --no-open: print a JSON summary on stdout")
+    vw.set_defaults(func=_cmd_view)
 
     for name, help_text in PLANNED:
         s = sub.add_parser(name, help=f"{help_text} (not yet available)", add_help=True)

@@ -26,3 +26,6 @@ from .algebraic import run_algebraic, run_precompensate
 from .clamped import run_clamped
 
 __all__ += ["run_algebraic", "run_precompensate", "run_clamped"]
+from .view import run_view
+
+__all__ += ["run_view"]

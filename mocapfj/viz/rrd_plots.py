@@ -18,6 +18,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from .rrd_signals import TIMELINE, joint_params, spring_torques, windows_of
+
 __all__ = ["log_loops", "log_frf", "plot_transform", "nice_ticks", "PLOT_W", "PLOT_H"]
 
 PLOT_W, PLOT_H = 400.0, 250.0
@@ -78,8 +80,6 @@ def _frame(rec, path: str, xlim, ylim, xlabel: str, ylabel: str, xtick_text=None
 
 def log_loops(rec, contents) -> list[str]:
     """The deflection-torque loop of each joint with a torque log; returns the joints drawn."""
-    from .rrd import TIMELINE, joint_params, spring_torques, windows_of
-
     rr = _rr()
     drawn = []
     for j in contents.joints:
