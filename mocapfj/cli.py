@@ -21,7 +21,6 @@ IDENTIFY_METHODS = ("motor_first", "two_step")   # mocapfj.ident.IDENTIFY_METHOD
 # Commands of the design that later versions fill in: (name, one-line help).
 PLANNED = [
     ("run", "the whole chain on a recording"),
-    ("report", "a readable report of a run"),
     ("batch", "run many recordings in parallel"),
 ]
 
@@ -495,6 +494,23 @@ def _cmd_view(args) -> int:
     return 0
 
 
+def _cmd_report(args) -> int:
+    from .pipeline.report import run_report
+
+    s = run_report(args.run_dir)
+
+    def human(s):
+        lines = [f"report of {s['run_dir']}: {len(s['sections'])} sections ({', '.join(s['sections'])}), "
+                 f"{len(s['figures'])} figures"]
+        for m in s["stages_missing"]:
+            lines.append(f"  not run: {m['name']} ({m['reason']})")
+        lines.append(f"  wrote {s['html']}, {s['markdown']} (figures in {s['figures_dir']})")
+        return "\n".join(lines)
+
+    _emit(args, s, human)
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(
         prog="mocapfj",
@@ -728,6 +744,14 @@ def build_parser() -> argparse.ArgumentParser:
     vw.add_argument("--no-open", action="store_true", help="only build the recording and print the viewer command")
     vw.add_argument("--json", action="store_true", help="with --no-open: print a JSON summary on stdout")
     vw.set_defaults(func=_cmd_view)
+
+    rp = sub.add_parser("report", help="(re)build a run's report: RUN_DIR/report.html (self-contained) and report.md",
+                        description="Reads the run's results (docs/formats.md, 'Run directory'; or one command's "
+                                    "--out, e.g. an identify or discover directory) and writes report.html, "
+                                    "report.md and report_files/ into it. Nothing else there is touched.")
+    rp.add_argument("run_dir", help="run directory (mocapfj run --out) or one command's --out")
+    rp.add_argument("--json", action="store_true", help="print a JSON summary on stdout")
+    rp.set_defaults(func=_cmd_report)
 
     for name, help_text in PLANNED:
         s = sub.add_parser(name, help=f"{help_text} (not yet available)", add_help=True)
