@@ -163,6 +163,10 @@ def identify(recordings: RecordingLike | Sequence[RecordingLike], *, method: str
     if method not in IDENTIFY_METHODS:
         raise InputError(None, "method", f"one of {list(IDENTIFY_METHODS)}", repr(method))
     names = tuple(str(r.root) if r.root is not None else r.name for r in recs)
+    cams = [r for r in recs if r.markers_from_cameras]
+    if cams:
+        raise InputError(cams[0].root, "markers", "3D markers", "a bundle whose markers are still 2D detections "
+                         "of its cameras", hint="'mocapfj run' triangulates them first (or 'mocapfj triangulate')")
     if all(r.markers is None for r in recs):
         from .ident.rigid import identify_rigid
 

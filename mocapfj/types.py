@@ -451,11 +451,18 @@ class Recording:
     spec: Mapping[str, object] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
-        if self.markers is None and self.controller is None:
+        if self.markers is None and self.controller is None and not self.markers_from_cameras:
             raise InputError(self.root, "recording", "a marker file, a controller log or both", "neither")
         object.__setattr__(self, "joints", tuple(self.joints))
         object.__setattr__(self, "clock_offset_s", check_scalar(self.clock_offset_s, "markers.clock_offset_s",
                                                                 file=self.root))
+
+    @property
+    def markers_from_cameras(self) -> bool:
+        """True for a bundle whose markers are still to be triangulated from its cameras' 2D
+        detections (``[rig] clusters``, no ``[markers]``: docs/formats.md); ``mocapfj run`` does it."""
+        rig = self.spec.get("rig") if isinstance(self.spec, Mapping) else None
+        return self.markers is None and isinstance(rig, Mapping) and "clusters" in rig
 
     def joint(self, name: str) -> JointSpec:
         for j in self.joints:

@@ -33,6 +33,7 @@ __all__ = [
     "FORMAT",
     "DEFAULT_DURATION_TOLERANCE_S",
     "load_recording",
+    "with_markers",
     "write_recording",
     "read_markers",
     "write_markers",
@@ -246,10 +247,23 @@ def load_recording(path: str | os.PathLike[str]) -> Recording:
     check_format(toml_path, doc, "recording", FORMAT_VERSION)
     name = require(toml_path, doc, "name", str, default=root.name)
 
-    if "markers" not in doc and "controller" not in doc:
+    rig_doc = doc.get("rig")
+    from_cameras = "markers" not in doc and isinstance(rig_doc, dict) and "clusters" in rig_doc
+    if "markers" not in doc and "controller" not in doc and not from_cameras:
         raise InputError(toml_path, "markers, controller", "a [markers] table, a [controller] table or both", "neither")
     has_markers, has_controller = "markers" in doc, "controller" in doc
     marker_file, offset = "", 0.0
+    if from_cameras:                    # the markers come from the cameras: the run triangulates them
+        for key, kind in (("file", str), ("detections", str), ("clusters", str), ("rate_hz", (int, float))):
+            require(toml_path, rig_doc, key, kind, "rig")
+        rate = float(rig_doc["rate_hz"])
+        if not (np.isfinite(rate) and rate > 0):
+            raise InputError(toml_path, "rig.rate_hz", "the cameras' frame rate, Hz (positive)", describe(rate))
+        offset = float(require(toml_path, rig_doc, "clock_offset_s", (int, float), "rig", default=0.0))
+        if not (np.isfinite(offset) and abs(offset) <= 86400.0):
+            raise InputError(toml_path, "rig.clock_offset_s", "a finite offset in seconds, at most a day",
+                             describe(offset))
+        _bundle_file(root, toml_path, "rig.clusters", rig_doc["clusters"])
     if has_markers:
         mk = require(toml_path, doc, "markers", dict)
         marker_file = require(toml_path, mk, "file", str, "markers")
@@ -265,7 +279,8 @@ def load_recording(path: str | os.PathLike[str]) -> Recording:
     joints_raw = require(toml_path, doc, "joints", list)
     if not joints_raw:
         raise InputError(toml_path, "joints", "at least one [[joints]] table", "none")
-    joints = tuple(_parse_joint(toml_path, tab, i, has_markers, has_controller) for i, tab in enumerate(joints_raw))
+    joints = tuple(_parse_joint(toml_path, tab, i, has_markers or from_cameras, has_controller)
+                   for i, tab in enumerate(joints_raw))
     names = [j.name for j in joints]
     if len(set(names)) != len(names):
         raise InputError(toml_path, "joints.name", "unique joint names", names)
@@ -313,6 +328,28 @@ def load_recording(path: str | os.PathLike[str]) -> Recording:
         marker_file=marker_file, controller_file=controller_file, time_column=time_column,
         urdf=urdf, rig=rig, detections=detections, root=root, spec=doc,
     )
+
+
+def with_markers(rec: Recording, markers: MarkerTrajectories, marker_file: str | os.PathLike[str]) -> Recording:
+    """A bundle whose markers come from its cameras (``[rig] clusters``, no ``[markers]``) with
+    the markers triangulated from them: the checks :func:`load_recording` makes on a marker file
+    (the joints' labels, the spans of the two streams, the controller's rate) made on these."""
+    from dataclasses import replace
+
+    path = Path(marker_file)
+    _check_markers(path, markers, rec.joints)
+    ctl = rec.controller
+    if ctl is not None:
+        sync = rec.spec.get("sync", {}) if isinstance(rec.spec.get("sync", {}), dict) else {}
+        tol = float(sync.get("duration_tolerance_s", DEFAULT_DURATION_TOLERANCE_S))
+        _check_spans(path, markers, ctl, rec.clock_offset_s, tol)
+        if markers.n_frames > 1 and ctl.n_samples > 1:
+            fs_c = 1.0 / float(np.median(np.diff(ctl.t)))
+            if fs_c < 0.5 * markers.rate_hz:
+                raise InputError(rec.controller_file, f"column {rec.time_column!r}",
+                                 f"a controller log at half the camera rate at least ({0.5 * markers.rate_hz:g} Hz)",
+                                 f"{fs_c:.3g} Hz")
+    return replace(rec, markers=markers, marker_file=str(path))
 
 
 def _check_markers(path, markers: MarkerTrajectories, joints) -> None:
@@ -384,6 +421,8 @@ def recording_spec(rec: Recording) -> dict:
     doc["controller"]["time_column"] = rec.time_column
     if rec.markers is None:
         del doc["markers"]
+    if rec.markers_from_cameras:
+        doc["rig"]["clock_offset_s"] = float(rec.clock_offset_s)
     if rec.controller is None:
         del doc["controller"]
     joints = []
@@ -393,7 +432,7 @@ def recording_spec(rec: Recording) -> dict:
                    parent_markers=WORLD if j.parent_is_world else list(j.parent_markers))
         if rec.controller is not None:
             tab.update(motor_position=j.motor_position, motor_torque=j.motor_torque)
-        if rec.markers is not None:
+        if rec.markers is not None or rec.markers_from_cameras:
             tab["link_markers"] = list(j.link_markers)
         joints.append(tab)
     doc["joints"] = joints

@@ -171,6 +171,10 @@ def calibrate_joints(rec: Recording, method: str = "auto") -> JointsResult:
     """
     if method not in CALIBRATION_METHODS:
         raise InputError(None, "method", f"one of {list(CALIBRATION_METHODS)}", repr(method))
+    if rec.markers_from_cameras:
+        raise InputError(rec.root, "markers", "3D markers (the joints stage calibrates axes from markers)",
+                         "a bundle whose markers are still 2D detections of its cameras",
+                         hint="'mocapfj run' triangulates them first (or 'mocapfj triangulate')")
     if rec.markers is None:
         raise InputError(rec.root, "markers", "a marker file (the joints stage calibrates axes from markers)",
                          "a recording without [markers]", hint="a rigid robot's log is identified by 'identify'")

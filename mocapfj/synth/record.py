@@ -24,7 +24,7 @@ from scipy.interpolate import CubicHermiteSpline
 from ..dynamics import PID, NLinkModel, SimulationResult, controller_log, element_to_table, simulate
 from ..io import write_csv_columns, write_json, write_recording
 from ..io.atomic import write_text_atomic
-from ..types import ControllerLog, Detections, JointSpec, MarkerTrajectories, Recording
+from ..types import ControllerLog, Detections, JointSpec, MarkerTrajectories, Recording, Rig
 from .cameras import ring_rig
 from .markers import DEFAULT_CLUSTERS, MarkerLayout, place_markers
 from .render import render_markers
@@ -231,8 +231,11 @@ def measure_concealment(scn: Scenario) -> list[dict]:
     return concealment(scn, simulate_scenario(scn), simulate_scenario(scn, with_effects=False), t_true, noise)
 
 
-def record_scenario(scn: Scenario, *, with_concealment: bool = True) -> SimulatedRecording:
-    """Simulate, log, render and assemble the recording of a scenario (in memory)."""
+def record_scenario(scn: Scenario, *, with_concealment: bool = True, rig: Rig | None = None) -> SimulatedRecording:
+    """Simulate, log, render and assemble the recording of a scenario (in memory).
+
+    `rig`: the cameras to render with (another trial's, for trials in one lab); default the
+    scenario's own ring of ``measurement.n_cameras`` cameras."""
     m = scn.measurement
     rng_layout, rng_rig, rng_render, rng_log = scenario_rngs(scn)
     timings = {}
@@ -278,7 +281,7 @@ def record_scenario(scn: Scenario, *, with_concealment: bool = True) -> Simulate
     T_world_link = forward_kinematics(q_full, T_world_base=base_pose())
     geometry = pa10_geometry()
     layout = marker_layout(scn, geometry, rng_layout)
-    rig = ring_rig(m.n_cameras, rng=rng_rig)
+    rig = ring_rig(m.n_cameras, rng=rng_rig) if rig is None else rig
     rendering = render_markers(t_mocap, T_world_link, layout, geometry, rig, rng_render, rate_hz=m.mocap_hz,
                                pixel_noise_px=m.pixel_noise_px, noise_m=m.marker_noise_m)
     markers = _with_dropouts(rendering.markers, m.dropout_rate, m.dropout_frames, rng_render)
