@@ -11,6 +11,7 @@ import argparse
 import json
 import sys
 from collections.abc import Callable, Sequence
+from pathlib import Path
 
 from . import __version__
 from .errors import InputError
@@ -20,8 +21,6 @@ IDENTIFY_METHODS = ("motor_first", "two_step")   # mocapfj.ident.IDENTIFY_METHOD
 
 # Commands of the design that later versions fill in: (name, one-line help).
 PLANNED = [
-    ("run", "the whole chain on a recording"),
-    ("batch", "run many recordings in parallel"),
 ]
 
 
@@ -83,22 +82,79 @@ def _human_recording(s: dict) -> str:
 def _cmd_demo(args) -> int:
     from .pipeline import run_demo
 
-    s = run_demo(_work(args), duration_s=args.duration)
+    s = run_demo(_work(args), duration_s=args.duration, progress=_progress(args))
 
     def human(s):
-        lines = [_human_simulate(s, f"{args.out}/pa10_joint2")]
-        for j in s["joints_fit"]:
-            lines.append(f"  joints {j['name']} ({j['method']}): radii {', '.join(f'{r:.1f}' for r in j['radii_mm'])} mm, "
-                         f"marker RMS {j['marker_rms_mm']:.2f} mm, angle SD {j['angle_sigma_rad'] * 1e3:.3f} mrad over "
-                         f"{j['q_range_deg']:.1f} deg")
-            lines.append(f"    deflection RMS {j['deflection_rms_rad'] * 1e3:.3f} mrad; its error against the truth "
-                         f"{j['deflection_error_rms_rad'] * 1e3:.3f} mrad (Cramer-Rao bound "
-                         f"{j['deflection_error_bound_rad'] * 1e3:.3f} mrad)")
-        lines.append(f"  wrote {args.out}/joints and {args.out}/summary.json")
+        r, p = s["rig"], s["planted"]
+        lines = [f"demo: {s['duration_s']:g} s of PA-10 joint 2 through {r['n_cameras']} cameras, planted "
+                 + ", ".join(f"{e['name']} on {e['joint']} ({e['ratio']:.2f} x the noise SD"
+                             + (", concealed)" if e["concealed"] else ")") for e in p),
+                 f"  rig from a wand wave: reprojection RMS {r['reprojection_rms_px']:.3f} px, wand length SD "
+                 f"{r['wand_length_sd_mm']:.2f} mm, camera centres within {r['camera_centre_error_max_mm']:.1f} mm "
+                 "of the truth"]
+        lines.append(_human_run_stages(s["run"]))
+        if "found" in s:
+            named = ", ".join(f"{e['name']} on {e['joint']}" for e in s["found"]) or "nothing"
+            lines.append(f"  discovery named: {named}; planted effects named: {', '.join(s['named_planted']) or 'none'}")
+            for j, f in s["fits"].items():
+                v = (s.get("validation") or {}).get("fit_before", {}).get(j), (s.get("validation") or {}).get("fit_after", {}).get(j)
+                lines.append(f"  {j}: fit {f['before']:.2f} % -> {f['after']:.2f} %"
+                             + (f"; on the validation trial {v[0]:.2f} % -> {v[1]:.2f} %" if v[0] is not None else ""))
+        lines.append(f"  {s['timings_s']['total_s']:.0f} s; look at {args.out}/run/report.html "
+                     f"(and 'mocapfj view {args.out}/run'); summary {args.out}/demo.json")
         return "\n".join(lines)
 
     _emit(args, s, human)
     return 0
+
+
+def _progress(args):
+    """Stage lines on stderr (not with --json, whose stdout is one JSON object; stderr still fine)."""
+    def say(line: str) -> None:
+        print(line, file=sys.stderr, flush=True)
+    return say
+
+
+def _human_run_stages(s: dict) -> str:
+    lines = []
+    for st in s["stages"]:
+        if st["status"] in ("done", "skipped"):
+            what = f"done in {st['seconds']:.1f} s" if st["status"] == "done" else "inputs unchanged, kept"
+            lines.append(f"  {st['name']:<12} {what}")
+        elif st["status"] == "failed":
+            lines.append(f"  {st['name']:<12} FAILED: {st['error']}")
+        else:
+            lines.append(f"  {st['name']:<12} {st['status'].replace('_', ' ')}: {st.get('reason') or ''}")
+    return "\n".join(lines)
+
+
+def _cmd_run(args) -> int:
+    from .pipeline.run import STAGES, run_pipeline
+
+    stages = None
+    if args.stages:
+        stages = [x.strip() for x in args.stages.split(",") if x.strip()]
+        bad = [x for x in stages if x not in STAGES]
+        if bad:
+            raise InputError("--stages", "names", f"stages among {', '.join(STAGES)}", ", ".join(bad))
+    r = run_pipeline(args.recording, args.out, validation=args.validation, stages=stages,
+                     progress=_progress(args), force=args.force)
+    s = r.to_dict()
+
+    def human(s):
+        lines = [f"run of {s['recording']}" + (f" (validation {s['validation']})" if s["validation"] else ""),
+                 _human_run_stages(s)]
+        if s["failed"]:
+            lines.append(f"  stage {s['failed']} failed; the stages before it are in {args.out}; fix the input and "
+                         "run again: finished stages whose inputs did not change are kept")
+        else:
+            look = [f for f in ("report.html", "recording.rrd") if (Path(args.out) / f).is_file()]
+            lines.append(f"  look at {args.out}/" + (f" and {args.out}/".join(look) if look else "")
+                         + " ('mocapfj view " + str(args.out) + "' opens the recording)" * ("recording.rrd" in look))
+        return "\n".join(lines)
+
+    _emit(args, s, human)
+    return 1 if r.failed else 0
 
 
 def _human_simulate(s: dict, out) -> str:
@@ -326,6 +382,35 @@ def _cmd_inspect(args) -> int:
     return 0
 
 
+def _cmd_batch(args) -> int:
+    from .pipeline.batch import run_batch
+
+    def progress(line):
+        print(line, file=sys.stderr, flush=True)
+
+    r = run_batch(args.recordings, _work(args), method=args.method, scheduler=args.scheduler, workers=args.workers, progress=progress)
+    s = r.to_dict()
+    s["trials"] = [{k: t[k] for k in ("name", "group", "status", "stage", "error", "seconds")} for t in s["trials"]]
+
+    def human(s):
+        lines = [f"batch of {s['n_recordings']} recording(s): {s['n_done']} done, {s['n_failed']} failed "
+                 f"({s['cluster']}, {s['seconds']:.1f} s)"]
+        for row in s["table"]:
+            if row["parameter"] == "torque_rms":
+                continue
+            cv = "" if row["n"] < 2 else f" +- {row['sd']:.3g} (CV {row['cv_pct']:.2f} %)"
+            lines.append(f"  {row['group']} {row['joint']} {row['parameter']}: {row['mean']:.5g}{cv} over "
+                         f"{row['n']} trial(s)" + ("" if row["determined"] else " (not determined)"))
+        for f in s["failed"]:
+            lines.append(f"  FAILED {f['name']} at {f['stage']}: {f['error']}")
+        lines.append(f"  wrote {args.out} (<recording>/joints, <recording>/identify, batch.json, batch.csv, "
+                     "trials.csv, batch.md)")
+        return "\n".join(lines)
+
+    _emit(args, s, human)
+    return 1 if r.failed else 0
+
+
 def _planned(name: str) -> Callable:
     def run(args) -> int:
         print(f"mocapfj: error: '{name}' is not available in mocapfj {__version__} yet; "
@@ -520,11 +605,29 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--version", action="version", version=f"mocapfj {__version__}")
     sub = p.add_subparsers(dest="command", metavar="COMMAND", required=True)
 
-    d = sub.add_parser("demo", help="the pipeline so far on a recording with known truth")
+    d = sub.add_parser("demo", help="every stage on a simulated recording through cameras, with known truth",
+                       description="Simulates PA-10 joint 2 with a concealed stiffening as 8 cameras' blobs and a "
+                                   "controller log, calibrates the rig from a wand wave, then runs every stage "
+                                   "(mocapfj run) into OUT/run: report.html, recording.rrd. About 2-3 minutes.")
     d.add_argument("--out", default="demo_out", help="output directory (default: demo_out)")
     d.add_argument("--duration", type=float, default=None, help="shorten the 60 s demo recording, s")
     d.add_argument("--json", action="store_true", help="print a JSON summary on stdout")
     d.set_defaults(func=_cmd_demo)
+
+    rn = sub.add_parser("run", help="every stage that applies, from a recording to a report",
+                        description="triangulate (a bundle of cameras' detections), joints, identify, discover, "
+                                    "the rerun recording and the report, into OUT/<stage>/ (docs/formats.md, Run "
+                                    "directory). Resumable: a finished stage whose inputs did not change is kept. "
+                                    "A failing stage leaves the finished ones and says why (exit 1).")
+    rn.add_argument("recording", help="recording bundle directory or recording.toml")
+    rn.add_argument("--out", required=True, help="run directory (created; rerun into it to resume)")
+    rn.add_argument("--validation", default=None, help="a second recording of the same joints, on which discovery "
+                    "proves its fit gain")
+    rn.add_argument("--stages", default=None, help="comma-separated stages to run (default all that apply)")
+    rn.add_argument("--force", action="store_true", help="rerun every stage, even those whose inputs did not change")
+    rn.add_argument("--json", action="store_true", help="print a JSON summary on stdout")
+    _allow_outside_bundle(rn)
+    rn.set_defaults(func=_cmd_run, in_place=True)
 
     sm = sub.add_parser("simulate", help="simulate a scenario file into a recording bundle with its truth")
     sm.add_argument("scenario", help="scenario TOML (datasets/*.toml)")
@@ -753,6 +856,22 @@ def build_parser() -> argparse.ArgumentParser:
     rp.add_argument("--json", action="store_true", help="print a JSON summary on stdout")
     rp.set_defaults(func=_cmd_report)
 
+    ba = sub.add_parser("batch", help="many recordings in parallel on Dask, parameters across repeated trials",
+                        description="One Dask task per recording (joints and identify, into OUT/<recording>/), "
+                                    "then the mean, SD and CV %% of every parameter across the repeated trials "
+                                    "of each joint (OUT/batch.json, batch.csv, trials.csv, batch.md). A failed "
+                                    "recording is reported and the others finish (exit 1). docs/batch.md.")
+    ba.add_argument("recordings", nargs="+", metavar="RECORDING", help="recording bundles (directories or recording.toml)")
+    ba.add_argument("--out", required=True, help="output directory")
+    ba.add_argument("--scheduler", default=None, metavar="ADDRESS",
+                    help="an existing Dask scheduler, e.g. tcp://host:8786 (default: a local cluster)")
+    ba.add_argument("--workers", type=int, default=None, metavar="N",
+                    help="worker processes of the local cluster, one thread each (default: the cores, at most 4)")
+    ba.add_argument("--method", default="output_error", choices=list(dict.fromkeys(["output_error", *IDENTIFY_METHODS])),
+                    help="identification method (as identify --method; two_step is Lightcap and Banks 2007's)")
+    ba.add_argument("--json", action="store_true", help="print a JSON summary on stdout")
+    ba.set_defaults(func=_cmd_batch)
+
     for name, help_text in PLANNED:
         s = sub.add_parser(name, help=f"{help_text} (not yet available)", add_help=True)
         s.add_argument("rest", nargs=argparse.REMAINDER, help=argparse.SUPPRESS)
@@ -770,6 +889,8 @@ def _run(args) -> int:
         from .io.outdir import check_output_dir, staged_output
 
         check_output_dir(args.out, _inputs(args))
+        if getattr(args, "in_place", False):        # run: resumable, each stage staged on its own
+            return int(args.func(args))
         with staged_output(args.out) as stage:
             args.stage = stage
             return int(args.func(args))
