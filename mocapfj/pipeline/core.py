@@ -1,5 +1,5 @@
 """Files over the measurement stages: recordings summarised (``inspect``), scenarios simulated
-(``simulate``), the demo, and the joints stage's results written (``joints``). The maths is in
+(``simulate``), and the joints stage's results written (``joints``). The maths is in
 the stages (:mod:`mocapfj.joints`, :mod:`mocapfj.synth`); this module composes them and writes."""
 
 from __future__ import annotations
@@ -12,7 +12,7 @@ from ..errors import InputError
 from ..io import load_recording, read_markers, write_json
 from ..types import MarkerTrajectories, Recording
 
-__all__ = ["summarize_markers", "summarize_recording", "inspect_path", "default_scenario", "run_simulate", "run_demo",
+__all__ = ["summarize_markers", "summarize_recording", "inspect_path", "default_scenario", "run_simulate",
            "write_joints", "run_joints"]
 
 
@@ -86,37 +86,6 @@ def default_scenario(name: str = "pa10_joint2") -> Path:
             return p
     raise InputError(f"datasets/{name}.toml", "scenario", "the shipped scenario file (run from the repository)",
                      "no such file")
-
-
-def run_demo(out: str | Path, duration_s: float | None = None) -> dict:
-    """The pipeline so far, on a recording whose truth is known.
-
-    Simulates the shipped pa10_joint2 scenario (PA-10 joint 2 with the parameters of Lightcap and
-    Banks 2007, Table I) into ``OUT/pa10_joint2`` (bundle, truth.json, truth.csv), loads it back
-    through the readers a lab's recording goes through, calibrates the joint and solves its angles
-    and deflections (``OUT/joints``), compares the deflection with the truth, and writes
-    ``OUT/summary.json``.
-    """
-    from ..io import read_csv_columns
-    from ..joints.stage import calibrate_joints
-
-    out = Path(out)
-    summary = run_simulate(default_scenario(), out / "pa10_joint2", duration_s=duration_s, concealment=False)
-    rec = load_recording(out / "pa10_joint2")
-    cal = calibrate_joints(rec)
-    joints = write_joints(cal, out / "joints")
-    truth = read_csv_columns(out / "pa10_joint2" / "truth.csv")
-    for j, res in zip(joints["joints"], cal.joints):
-        d = res.deflection
-        true_delta = np.interp(d.t, truth["time"], truth[f"delta_{j['name']}"])
-        err = d.delta - true_delta
-        ok = np.isfinite(err)
-        err = err[ok] - err[ok].mean()
-        j["deflection_error_rms_rad"] = float(np.sqrt(np.mean(err**2)))
-        j["deflection_error_bound_rad"] = float(np.sqrt(np.mean(d.sigma_delta[ok] ** 2)))
-    summary["joints_fit"] = joints["joints"]
-    write_json(out / "summary.json", summary)
-    return summary
 
 
 def run_simulate(scenario: str | Path, out: str | Path, duration_s: float | None = None,

@@ -9,7 +9,7 @@ from pathlib import Path
 from ..io import load_recording, write_json
 from .core import write_joints
 
-__all__ = ["run_discover"]
+__all__ = ["run_discover", "write_discovery"]
 
 
 def run_discover(recording, out: str | Path, model: str | Path | None = None, validation=None) -> dict:
@@ -21,8 +21,7 @@ def run_discover(recording, out: str | Path, model: str | Path | None = None, va
     OUT/residuals.csv (t, and per joint r_delta_before/after rad, r_u_before/after N m).
     """
     from ..api import discover
-    from ..discover import read_model_file, write_model_file
-    from ..io import write_csv_columns
+    from ..discover import read_model_file
     from ..joints.stage import calibrate_joints
 
     out = Path(out)
@@ -38,6 +37,17 @@ def run_discover(recording, out: str | Path, model: str | Path | None = None, va
         write_joints(val_cal, out / "validation_joints")
     d = discover(rec, model=model, validation=val_rec, calibration=cal, validation_calibration=val_cal)
     d = replace(d, recording=str(recording), model_source=str(model) if model is not None else "identified")
+    return write_discovery(d, out)
+
+
+def write_discovery(d, out: str | Path) -> dict:
+    """Write a :class:`mocapfj.discover.Discovery` into OUT: discovery.json (its ``to_dict()``),
+    the augmented model model.toml and the before/after residuals residuals.csv; returns the
+    summary."""
+    from ..discover import write_model_file
+    from ..io import write_csv_columns
+
+    out = Path(out)
     summary = d.to_dict()
     write_json(out / "discovery.json", summary)
     write_model_file(out / "model.toml", d.models.values(),
