@@ -23,19 +23,6 @@ def test_help_lists_every_command_of_the_design(capsys):
         assert f"\n    {cmd} " in out or f"\n    {cmd}\n" in out, cmd
 
 
-def test_demo_simulates_pa10_joint2_and_reads_it_back(tmp_path, capsys):
-    assert main(["demo", "--out", str(tmp_path / "d"), "--duration", "8", "--json"]) == 0
-    s = json.loads(capsys.readouterr().out)
-    (fit,) = s["joints_fit"]
-    assert fit["name"] == "j2" and fit["deflection_error_rms_rad"] < 1.15 * fit["deflection_error_bound_rad"]
-    assert s["scenario"] == "pa10_joint2" and [j["name"] for j in s["joints"]] == ["j2"]
-    assert s["markers"]["n_frames"] == 2001 and s["controller"]["n_samples"] == 8001
-    assert s["markers"]["n_markers"] == 20 and s["rig_cameras"] == 8
-    assert 3e-4 < s["truth"]["joints"][0]["angle_sigma_rad"] < 6e-4
-    assert (tmp_path / "d" / "pa10_joint2" / "recording.toml").is_file()
-    assert json.loads((tmp_path / "d" / "summary.json").read_text())["name"] == "pa10_joint2"
-
-
 def test_simulate_reports_concealment(tmp_path, capsys):
     from pathlib import Path
 
