@@ -8,7 +8,7 @@ import sys
 
 import pytest
 
-from mocapfj.cli import PLANNED, main
+from mocapfj.cli import main
 
 DESIGN_COMMANDS = ["demo", "simulate", "calibrate-camera", "calibrate-rig", "triangulate", "joints", "identify",
                    "frf", "discover", "run", "report", "view", "batch"]
@@ -77,13 +77,6 @@ def test_inspect_of_a_cut_c3d_is_one_line_and_exit_2(tmp_path):
                            capture_output=True, text=True, timeout=60)
         assert r.returncode == 2 and r.stdout == "" and r.stderr.count("\n") == 1, r.stderr
         assert f"{c3d.name}: {says}" in r.stderr and "cut" in r.stderr
-
-
-@pytest.mark.parametrize("name", [n for n, _ in PLANNED])
-def test_planned_commands_say_so_and_exit_2(name, capsys):
-    assert main([name, "x"]) == 2
-    err = capsys.readouterr().err
-    assert err.count("\n") == 1 and f"'{name}' is not available" in err
 
 
 def test_console_script_runs(tmp_path):
