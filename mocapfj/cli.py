@@ -19,11 +19,6 @@ from .io import to_jsonable
 
 IDENTIFY_METHODS = ("motor_first", "two_step")   # mocapfj.ident.IDENTIFY_METHODS, without importing ident
 
-# Commands of the design that later versions fill in: (name, one-line help).
-PLANNED = [
-]
-
-
 def _work(args):
     """Where a command writes: the staging directory main() made beside --out."""
     return getattr(args, "stage", None) or args.out
@@ -409,14 +404,6 @@ def _cmd_batch(args) -> int:
 
     _emit(args, s, human)
     return 1 if r.failed else 0
-
-
-def _planned(name: str) -> Callable:
-    def run(args) -> int:
-        print(f"mocapfj: error: '{name}' is not available in mocapfj {__version__} yet; "
-              "'mocapfj --help' lists what is", file=sys.stderr)
-        return 2
-    return run
 
 
 def _allow_outside_bundle(parser) -> None:
@@ -872,10 +859,6 @@ def build_parser() -> argparse.ArgumentParser:
     ba.add_argument("--json", action="store_true", help="print a JSON summary on stdout")
     ba.set_defaults(func=_cmd_batch)
 
-    for name, help_text in PLANNED:
-        s = sub.add_parser(name, help=f"{help_text} (not yet available)", add_help=True)
-        s.add_argument("rest", nargs=argparse.REMAINDER, help=argparse.SUPPRESS)
-        s.set_defaults(func=_planned(name))
     return p
 
 
