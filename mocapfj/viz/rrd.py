@@ -396,9 +396,12 @@ def summary_markdown(contents: RunContents, shown: list[str]) -> str:
     return "\n".join(lines) + "\n"
 
 
-def log_run(rec, contents: RunContents, *, magnify: float = 1.0) -> list[str]:
+def log_run(rec, contents: RunContents, *, magnify: float = 1.0, timings: dict | None = None) -> list[str]:
     """Log a run's contents into an open rerun RecordingStream; returns what was shown (one word
-    per part). Static scene first, then the columnar series; the caller saves and disconnects."""
+    per part). Static scene first, then the columnar series; the caller saves and disconnects.
+    `timings`, when given, receives the seconds each part took (benchmarks/bench_viz.py)."""
+    import time
+
     from .rrd_plots import log_frf, log_loops
 
     rr = _rr()
@@ -406,42 +409,51 @@ def log_run(rec, contents: RunContents, *, magnify: float = 1.0) -> list[str]:
         from ..errors import InputError
 
         raise InputError(None, "magnify", "a positive factor", magnify)
+    timings = {} if timings is None else timings
     shown = []
+    centroids = {}
+
+    def part(name, fn, *args):
+        tic = time.perf_counter()
+        out = fn(*args)
+        timings[name] = timings.get(name, 0.0) + time.perf_counter() - tic
+        return out
+
     rec.log("/", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
     if contents.rig is not None:
-        _log_cameras(rec, contents.rig)
+        part("cameras", _log_cameras, rec, contents.rig)
         shown.append("cameras")
-    centroids = {}
     if contents.markers is not None:
-        centroids = _log_markers(rec, contents)
+        centroids = part("markers", _log_markers, rec, contents)
         shown.append("markers")
     for c, j in enumerate(contents.joints):
-        _log_joint_geometry(rec, contents, j, c, magnify)
+        part("joint geometry", _log_joint_geometry, rec, contents, j, c, magnify)
     if contents.joints:
         shown.append("joint axes")
     if contents.urdf is not None and contents.joints:
-        if _log_urdf(rec, contents):
+        if part("robot (URDF)", _log_urdf, rec, contents):
             shown.append("robot (URDF)")
     elif contents.markers is not None and contents.joints:
-        _log_links(rec, contents, centroids)
+        part("links", _log_links, rec, contents, centroids)
         shown.append("links")
     for c, j in enumerate(contents.joints):
-        _log_joint_series(rec, contents, j, c)
+        part("joint signals", _log_joint_series, rec, contents, j, c)
     if contents.joints:
         shown.append("joint signals")
     if contents.residuals is not None:
-        _log_residuals(rec, contents)
+        part("residuals", _log_residuals, rec, contents)
         shown.append("residuals")
-    if log_loops(rec, contents):
+    if part("loops", log_loops, rec, contents):
         shown.append("loops")
-    if log_frf(rec, contents):
+    if part("FRF", log_frf, rec, contents):
         shown.append("FRF")
     rec.log("summary", rr.TextDocument(summary_markdown(contents, shown), media_type=rr.MediaType.MARKDOWN), static=True)
     return shown
 
 
-def write_recording_file(contents: RunContents, out, *, magnify: float = 1.0) -> Path:
-    """Write `contents` as a .rrd file at `out` (atomically) with the default blueprint."""
+def write_recording_file(contents: RunContents, out, *, magnify: float = 1.0, timings: dict | None = None) -> Path:
+    """Write `contents` as a .rrd file at `out` (atomically) with the default blueprint;
+    `timings` as in :func:`log_run`, plus "save" (the flush to disk on disconnect)."""
     from ..io.atomic import atomic_path
     from .rrd_blueprint import run_blueprint
 
@@ -451,9 +463,14 @@ def write_recording_file(contents: RunContents, out, *, magnify: float = 1.0) ->
     with atomic_path(out) as tmp:
         rec.save(str(tmp), default_blueprint=run_blueprint(contents))
         try:
-            log_run(rec, contents, magnify=magnify)
+            log_run(rec, contents, magnify=magnify, timings=timings)
         finally:
+            import time
+
+            tic = time.perf_counter()
             rec.disconnect()                   # writes the footer: the file is complete
+            if timings is not None:
+                timings["save"] = time.perf_counter() - tic
     return out
 
 
