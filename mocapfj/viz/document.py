@@ -75,7 +75,7 @@ figure img { max-width: 100%; height: auto; border: 1px solid #e3e6ea; }
 figcaption { color: #4a535c; font-size: 0.92em; margin-top: 4px; }
 """
 
-_NUM_CHARS = set("0123456789+-−.,eE %±×/()")
+_NUM_CHARS = set("0123456789+-−.,eE %±×/()[]")
 
 
 def _is_num(cell: str) -> bool:
@@ -84,12 +84,15 @@ def _is_num(cell: str) -> bool:
 
 
 def _html_table(t: Table) -> str:
+    """Columns whose every filled cell is a number (or a vector of numbers) are right-aligned and
+    do not wrap; the others are text."""
     out = ["<table>", "<thead><tr>" + "".join(f"<th>{html.escape(h)}</th>" for h in t.header) + "</tr></thead>",
            "<tbody>"]
+    num = [all(_is_num(r[k]) for r in t.rows if k < len(r) and r[k].strip()) for k in range(len(t.header))]
     for i, row in enumerate(t.rows):
         flag = t.flags[i] if i < len(t.flags) and t.flags[i] else ""
-        cells = "".join(f'<td class="num">{html.escape(c)}</td>' if _is_num(c) else f"<td>{html.escape(c)}</td>"
-                        for c in row)
+        cells = "".join(f'<td class="num">{html.escape(c)}</td>' if k < len(num) and num[k] and c.strip()
+                        else f"<td>{html.escape(c)}</td>" for k, c in enumerate(row))
         out.append(f'<tr class="{flag}">{cells}</tr>' if flag else f"<tr>{cells}</tr>")
     out.append("</tbody></table>")
     return "\n".join(out)

@@ -244,7 +244,7 @@ def spring_figure(delta: np.ndarray, tau_s: np.ndarray, k: float, tau0: float, j
         a.set_xlabel("deflection q_m − q (mrad)")
         a.set_ylabel("spring torque (N m)")
         a.set_title(f"joint {joint}: spring torque against deflection")
-        a.legend(loc="upper left")
+        a.legend(loc="lower right")
         if two:
             b = ax[0, 1]
             dr = direction[ok]
@@ -317,6 +317,14 @@ def frf_figure(f_hz: np.ndarray, mag: np.ndarray, phase_rad: np.ndarray, coheren
                        textcoords="offset points", xytext=(3, -12 - 14 * (i % 2)), fontsize=9, color="k",
                        bbox=dict(boxstyle="square,pad=0.1", fc="white", ec="none", alpha=0.8))
         a.legend(loc="lower left")
+        from matplotlib.ticker import FixedLocator, FuncFormatter, NullFormatter
+
+        lo, hi = (float(np.min(mf)), float(np.max(mf))) if np.size(mf) else (0.1, 100.0)
+        ticks = [m * 10.0 ** e for e in range(-3, 5) for m in (1, 2, 5) if lo / 1.2 <= m * 10.0 ** e <= hi * 1.2]
+        for x in ax:
+            x.xaxis.set_major_locator(FixedLocator(ticks))
+            x.xaxis.set_major_formatter(FuncFormatter(lambda v, _: f"{v:g}"))
+            x.xaxis.set_minor_formatter(NullFormatter())
         ax[-1].set_xlabel("frequency (Hz)")
         return fig
 

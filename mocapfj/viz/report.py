@@ -128,7 +128,10 @@ def _stages_section(files: RunFiles) -> tuple[Section, list[tuple[str, str]]]:
         where_s = (os.path.relpath(where, files.root) if where is not None else "")
         rows.append((n, _WHAT.get(n, ""), status if present or m else "not run",
                      fmt(m.get("seconds")) if m.get("seconds") is not None else "", where_s or "—", reason))
-    blocks = [Table(("stage", "what", "status", "time (s)", "results in", "note"), tuple(rows), tuple(flags))]
+    header = ("stage", "what", "status", "time (s)", "results in", "note")
+    if not any(r[3] for r in rows):                       # no times recorded: no empty column
+        header, rows = header[:3] + header[4:], [r[:3] + r[4:] for r in rows]
+    blocks = [Table(header, tuple(rows), tuple(flags))]
     if missing:
         blocks.append(Note("Stages that did not run (their sections are left out): "
                            + "; ".join(f"{n} ({r})" for n, r in missing) + ".", "warn"))
@@ -204,7 +207,9 @@ def build_report(run_dir) -> ReportResult:
     if len(set(names)) != len(names):
         raise AssertionError(f"figure names repeat: {names}")      # a bug in the sections, not bad input
     man = files.manifest or {}
-    title = "mocapfj report" + (f": {Path(man['recording']).name}" if man.get("recording") else f": {root.name}")
+    rec_name = next((b.rows[0][1] for s in sections if s.key == "recording" for b in s.blocks
+                     if isinstance(b, Table) and b.rows and b.rows[0][0] == "name" and b.rows[0][1]), None)
+    title = "mocapfj report: " + (rec_name or (Path(man["recording"]).name if man.get("recording") else root.name))
     meta = (f"Run directory {root}" + (f"; created {man['created_utc']}" if man.get("created_utc") else "")
             + (f"; mocapfj {man['mocapfj_version']}" if man.get("mocapfj_version") else "")
             + ". SI units unless a unit is given; ± is one standard deviation.")

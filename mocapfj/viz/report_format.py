@@ -22,7 +22,7 @@ __all__ = ["fmt", "pm", "parse_pm", "UNITS", "read_result_json", "read_toml", "r
 # Units of the identified parameters (docs/identification.md; link side).
 UNITS = {"I": "kg m²", "J": "kg m²", "k": "N m/rad", "k1": "N m/rad", "k3": "N m/rad³", "c": "N m",
          "v": "N m s/rad", "b": "N m s/rad", "d": "N m s/rad", "mglx": "N m", "mgly": "N m", "tau0": "N m",
-         "alpha": "1", "loop_half_height_Nm": "N m", "gap_rad": "rad", "delay_s": "s", "tau1": "N m",
+         "loop_half_height_Nm": "N m", "gap_rad": "rad", "delay_s": "s", "tau1": "N m",
          "tau2": "N m", "k2": "N m/rad"}
 
 
@@ -62,7 +62,10 @@ def pm(value, sd, unit: str = "") -> str:
     d = max(0, -e)
     if e > 0:
         v, s = round(v / 10 ** e) * 10 ** e, round(s / 10 ** e) * 10 ** e
-    body = f"{v:.{d}f} ± {s:.{d}f}"
+    vs = f"{v:.{d}f}"
+    if float(vs) == 0:
+        vs = vs.lstrip("-")                           # no "-0.0"
+    body = f"{vs} ± {s:.{d}f}"
     return (f"({body})e{scale:+03d}" if scale else body) + u
 
 

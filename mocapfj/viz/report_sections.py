@@ -48,6 +48,11 @@ def _vec(v, scale: float = 1.0, digits: int = 4) -> str:
     return "[" + ", ".join(f"{scale * x:+.{digits}f}" for x in v) + "]"
 
 
+def _sds(v, scale: float = 1.0) -> str:
+    """A vector of SDs: unsigned, two significant digits."""
+    return "n/a" if v is None else "[" + ", ".join(fmt(scale * x, 2) for x in v) + "]"
+
+
 # ---------------------------------------------------------------- recording
 
 def recording_blocks(s: dict, role: str, path) -> list:
@@ -69,8 +74,8 @@ def recording_blocks(s: dict, role: str, path) -> list:
     rows.append(("cameras", f"{s.get('rig_cameras', 0)} in the rig, {s.get('detections', 0)} 2D detections"))
     if s.get("urdf"):
         rows.append(("URDF", str(s["urdf"])))
-    blocks = [Paragraph(f"The {role} recording" + (" (held out: discovery's evidence)." if role == "validation"
-                                                   else ".")),
+    blocks = [Paragraph("The recording the stages ran on." if role == "recording" else
+                        "The validation recording (held out: discovery judges each effect on it)."),
               Table(("item", "value"), tuple(rows))]
     jr = []
     for j in s.get("joints", []):
@@ -118,7 +123,7 @@ def _rig_blocks(d: dict) -> list:
         ps = c.get("position_std_m")
         rows.append((c["name"], fmt(c.get("rms_px"), 3), fmt(c.get("rms_mm"), 3), str(c.get("n_observations", "")),
                      str(c.get("n_outliers", "")), _vec(c.get("position_m"), 1.0, 3),
-                     _vec(ps, 1e3, 2) if ps is not None else "n/a", _vec(c.get("rotation_std_deg"), 1.0, 3),
+                     _sds(ps, 1e3), _sds(c.get("rotation_std_deg")),
                      fmt(c.get("fx"), 6)))
     return [Paragraph(text),
             Table(("camera", "RMS (px)", "RMS (mm)", "points", "outliers", "centre (m)", "centre SD (mm)",
@@ -144,9 +149,10 @@ def _triangulation_blocks(d: dict) -> list:
     if tri.get("predicted_sd_median_mm") is not None:
         rows.append(("predicted point SD (median)", f"{fmt(tri['predicted_sd_median_mm'], 3)} mm"))
     blocks = [Paragraph(text), Table(("coverage", "value"), tuple(rows))]
-    by = (d.get("labelling") or {}).get("nan_share_by_label") or {}
+    by = {k: v for k, v in ((d.get("labelling") or {}).get("nan_share_by_label") or {}).items() if v}
     if by:
         worst = sorted(by.items(), key=lambda kv: -kv[1])[:12]
+        blocks.append(Paragraph("Markers with missing samples (the most first):"))
         blocks.append(Table(("marker", "missing (%)"), tuple((k, f"{100 * v:.2f}") for k, v in worst)))
     return blocks
 
@@ -200,7 +206,7 @@ def _joint_section(files, j: dict, path: Path) -> Section:
     cov_p = np.asarray(geo.get("cov_point_m2", np.full((3, 3), np.nan)), dtype=float)
     sd_p = np.sqrt(np.clip(np.diag(cov_p), 0, None)) if np.isfinite(cov_p).all() else None
     rows.append(("axis point (parent frame)", _vec(j["point_m"], 1e3, 2) + " mm",
-                 "" if sd_p is None else "SD " + _vec(sd_p, 1e3, 3) + " mm"))
+                 "" if sd_p is None else "SD " + _sds(sd_p, 1e6) + " µm"))
     if j.get("axis_world") is not None:
         rows.append(("axis (world)", _vec(j["axis_world"], 1.0, 5), ""))
         rows.append(("axis point (world)", _vec(j["point_world_m"], 1e3, 2) + " mm", ""))
@@ -226,8 +232,8 @@ def _joint_section(files, j: dict, path: Path) -> Section:
         blocks.append(Figure(f"joint_{_slug(name)}_signals.png",
                              F.signals_figure(t, a["q"], a.get("q_m"), a.get("delta"), a.get("sigma_delta"),
                                               a.get("tau"), name),
-                             f"Joint {name}: link and motor angle, deflection with its ±1 SD band, and the logged "
-                             f"torque against time (from {apath.name})."))
+                             f"Joint {name}: link and motor angle, deflection (each sample, and low-passed at 5 Hz), "
+                             f"and the logged torque against time (from {apath.name})."))
     return Section(f"joints/{name}", "Joint geometry", tuple(blocks), subtitle=f"Joint {name}")
 
 
@@ -339,10 +345,12 @@ def _spring_section(files, j: dict) -> Section | None:
     tau0, k, what = curve
     rate = F.smooth_derivatives(tau_s, dt, 0.1)[0]           # N m/s; at rest (below 10 % of its RMS) left out
     direction = np.where(np.abs(rate) < 0.1 * np.sqrt(np.nanmean(rate ** 2)), np.nan, np.sign(rate))
-    rows = tuple((p, fmt(v, 6), UNITS.get(p, "")) for p, v in (spring.get("params") or {}).items())
+    ident = j["params"]
+    rows = tuple((p, pm(v, (ident.get(p) or {}).get("std")) if p in ident else fmt(v, 6), UNITS.get(p, ""))
+                 for p, v in (spring.get("params") or {}).items())
     blocks = [Paragraph(f"Spring model {spring.get('model')}"
                         + (f", R² {fmt(spring['r2'], 6)}" if spring.get("r2") is not None else "") + "."),
-              Table(("spring parameter", "value", "unit"), rows),
+              Table(("spring parameter", "value (± SD)", "unit"), rows),
               Figure(f"spring_{_slug(name)}.png",
                      F.spring_figure(a["delta"], tau_s, k, tau0, name, direction, spring.get("r2")),
                      f"Joint {name}: spring torque against deflection with {what} (left); what the line leaves, "
@@ -468,9 +476,10 @@ def _discovery(root: Path, d: dict, path: Path) -> list[Section]:
     effects = d.get("effects") or []
     head = [Note(f"Verdict: {d.get('verdict')}. {str(d.get('stopped', '')).capitalize()}.",
                  "warn" if effects else "info"),
-            Paragraph("Fit (%): 100 (1 - |residual| / |signal|) of the simulated model against the recording, "
-                      "deflection and torque together, in the band below which the recording has signal; the floor "
-                      "is what the noise allows (± its SD).")]
+            Paragraph("Fit (%) of the simulated model against the recording: 100 (1 − sqrt((e_δ² + e_u²) / 2)), "
+                      "e the normalised error ||y − ŷ|| / ||y − mean(y)|| of the deflection (δ) and of the motor "
+                      "torque (u), in the band the model claims. The noise floor is the fit a perfect model would "
+                      "reach on this recording (± its SD); the gap to it is what is left to explain.")]
     fr = _fit_rows(d)
     if fr:
         head.append(Table(("joint", "recording", "fit before (%)", "fit after (%)", "change (points)", "noise floor (%)",
