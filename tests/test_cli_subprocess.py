@@ -242,3 +242,10 @@ def test_frf(files, tmp_path):
     assert s["model"]["name"] == "two_inertia" and abs(s["model"]["params"]["k"]["value"] / P["k"] - 1) < 0.03
     _bad(_cli("frf", tmp_path / "log.csv", "--input", "torque", "--output", "qm", "--out", tmp_path / "x"), "--input",
          out=tmp_path / "x")
+
+
+def test_view_bad_input(tmp_path):
+    """The recording read back and the viewer command: tests/viz/test_rrd.py (no viewer is started here)."""
+    _bad(_cli("view", tmp_path / "missing", "--no-open"), "missing", "run directory", "no such directory")
+    (tmp_path / "empty").mkdir()
+    _bad(_cli("view", tmp_path / "empty"), "empty", "results")
