@@ -313,7 +313,7 @@ def _client(scheduler: str | None, workers: int | None):
         return client, None, f"scheduler {scheduler} ({n} workers at start)"
     n = workers or min(os.cpu_count() or 1, 4)
     cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, host="127.0.0.1",
-                           dashboard_address=None, silence_logs=logging.ERROR)
+                           dashboard_address=":0", silence_logs=logging.ERROR)
     return Client(cluster), cluster, f"local cluster of {n} worker processes, 1 thread each"
 
 
