@@ -249,3 +249,10 @@ def test_view_bad_input(tmp_path):
     _bad(_cli("view", tmp_path / "missing", "--no-open"), "missing", "run directory", "no such directory")
     (tmp_path / "empty").mkdir()
     _bad(_cli("view", tmp_path / "empty"), "empty", "results")
+
+
+def test_report(tmp_path):
+    """Its real runs (a run directory's report, HTML and figures checked): tests/viz/test_report.py."""
+    _bad(_cli("report", tmp_path / "missing"), "missing", "no such directory")
+    (tmp_path / "empty").mkdir()
+    _bad(_cli("report", tmp_path / "empty"), "empty", "none of them")

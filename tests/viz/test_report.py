@@ -351,14 +351,15 @@ def test_pm_rounds_at_the_sds_second_digit():
 
 def test_cli_report_subprocess(run, tmp_path):
     d = tmp_path / "r"
-    shutil.copytree(run[0] / "frf", d)
+    shutil.copytree(run[0] / "identify", d)
     r = subprocess.run([sys.executable, "-m", "mocapfj.cli", "report", str(d), "--json"], capture_output=True,
                        text=True, cwd=ROOT, timeout=120)
     assert r.returncode == 0, r.stderr
     s = json.loads(r.stdout)
-    assert s["sections"] == ["stages", "frf"] and s["figures"] == ["frf.png"] and Path(s["html"]).is_file()
-    (d / "frf.json").write_text("{not json")
+    assert s["sections"] == ["stages", "identification"] and s["figures"] == ["identify_j1_sd.png"]
+    assert Path(s["html"]).is_file() and {m["name"] for m in s["stages_missing"]} >= {"joints", "discover"}
+    (d / "identify.json").write_text("{not json")
     r = subprocess.run([sys.executable, "-m", "mocapfj.cli", "report", str(d)], capture_output=True, text=True,
                        cwd=ROOT, timeout=120)
     assert r.returncode == 2 and r.stdout == "" and r.stderr.count("\n") == 1
-    assert str(d / "frf.json") in r.stderr and "Traceback" not in r.stderr
+    assert str(d / "identify.json") in r.stderr and "Traceback" not in r.stderr
