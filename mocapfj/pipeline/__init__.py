@@ -36,3 +36,7 @@ __all__ += ["run_view"]
 from .batch import run_batch
 
 __all__ += ["run_batch"]
+
+from .report import run_report
+
+__all__ += ["run_report"]
