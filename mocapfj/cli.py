@@ -28,7 +28,7 @@ def _inputs(args) -> list:
     """The paths a command reads (that --out must keep clear of)."""
     out = []
     for name in ("scenario", "recording", "model", "validation", "board", "wand", "detections", "intrinsics", "lframe",
-                 "csv", "wrench_file", "urdf", "mdh"):
+                 "csv", "wrench_file", "urdf", "mdh", "compare"):
         if getattr(args, name, None):
             out.append(getattr(args, name))
     views = [p for paths in (getattr(args, "camera", None) or []) for p in paths]
@@ -521,7 +521,7 @@ def _cmd_frf(args) -> int:
                 time=args.time, period_s=args.period,
                 model=args.model or ("rational" if args.single_record else "two_inertia"), transient=args.transient,
                 realisations=args.realisations, estimator=args.estimator, single_record=args.single_record,
-                order=args.order, steady_period=args.steady_period)
+                order=args.order, steady_period=args.steady_period, compare=args.compare, joint=args.joint)
 
     def human(s):
         f = s["frf"]
@@ -547,6 +547,12 @@ def _cmd_frf(args) -> int:
             for md in s["modes"]:
                 lines.append(f"  {md['kind']} {md['f_hz']:.4g} +- {md['f_hz_std']:.2g} Hz, zeta {md['zeta']:.3g} +- "
                              f"{md['zeta_std']:.2g}")
+        c = s.get("comparison")
+        if c:
+            lines.append(f"  against the time-domain identification of {c['joint']} ({c['source']}): {c['verdict']}")
+            lines += [f"    {line}" for line in c["lines"]]
+            lines += [f"    {m['kind']}: FRF {m['f_hz_frf']:.4g} Hz, predicted by identify {m['f_hz_identify']:.4g} Hz "
+                      f"({m['diff_pct']:+.2f} %)" for m in c["modes"]]
         lines.append(f"  wrote {args.out}/frf.json, frf.csv")
         return "\n".join(lines)
 
@@ -818,6 +824,10 @@ def build_parser() -> argparse.ArgumentParser:
                          "from the late periods beyond the noise, at least 1)")
     fr.add_argument("--realisations", type=int, default=1,
                     help="the record holds this many equal consecutive realisations (default 1)")
+    fr.add_argument("--compare", default=None, metavar="IDENTIFY",
+                    help="the time-domain identification of the same joint (identify.json, its directory or a run "
+                         "directory): the two-inertia parameters and modes held against it, disagreements named")
+    fr.add_argument("--joint", default=None, help="with --compare: the joint of the identification (default its only one)")
     fr.add_argument("--out", required=True, help="output directory")
     fr.add_argument("--json", action="store_true", help="print a JSON summary on stdout")
     fr.set_defaults(func=_cmd_frf)

@@ -12,7 +12,7 @@ from ..errors import InputError
 from ..io import write_json
 from ..io.csvio import check_increasing, read_csv_columns, write_csv_columns
 
-__all__ = ["run_frf", "read_frf_columns", "find_period", "FRF_CLI_MODELS"]
+__all__ = ["run_frf", "read_frf_columns", "find_period", "FRF_CLI_MODELS", "read_identified_joint", "compare_with_identify"]
 
 FRF_CLI_MODELS = ("two_inertia", "rational", "none")
 
@@ -88,7 +88,8 @@ def find_period(x, *, exact: bool) -> int | None:
 
 def run_frf(path, out, *, input: str, output: str, reference: str | None = None, time: str | None = None,
             period_s: float | None = None, model: str = "two_inertia", transient="auto", realisations: int = 1,
-            estimator: str = "auto", single_record: bool = False, order=None, steady_period: bool = False) -> dict:
+            estimator: str = "auto", single_record: bool = False, order=None, steady_period: bool = False,
+            compare=None, joint: str | None = None) -> dict:
     """``mocapfj frf``: the FRF of column `output` over column `input` (Makarov et al. 2012, eq. 23-27),
     and the two-inertia model fitted to it with its modes.
 
@@ -100,7 +101,10 @@ def run_frf(path, out, *, input: str, output: str, reference: str | None = None,
     :func:`mocapfj.ident.frf_single.fit_rational`) or ``"none"``; `steady_period`: that record is one whole
     period in steady state (G = Y / U, the LPM for the noise only; modes narrower than a DFT line).
     Writes OUT/frf.json (the summary) and OUT/frf.csv (per line: f_hz,
-    the FRF, magnitude, phase, coherence, noise SD, and the model's FRF).
+    the FRF, magnitude, phase, coherence, noise SD, and the model's FRF). `compare`: the time-domain
+    identification of the same joint (an identify.json, its directory or a run directory), joint
+    `joint` (default its only one): the two-inertia parameters held against it
+    (:func:`mocapfj.ident.crosscheck.cross_check`), in the summary's ``comparison``.
     """
     from ..ident.frf import estimate_frf
     from ..ident.frf_fit import fit_two_inertia
@@ -120,6 +124,12 @@ def run_frf(path, out, *, input: str, output: str, reference: str | None = None,
         raise InputError(None, "steady-period", "only with --single-record", True)
     if order is not None and model != "rational":
         raise InputError(None, "order", "only with the rational model (--single-record)", list(order))
+    reference_ident = None
+    if compare is not None:
+        if model != "two_inertia" or single_record:
+            raise InputError(None, "compare", "the two-inertia model (its parameters are compared)",
+                             "--single-record" if single_record else f"--model {model}")
+        reference_ident = read_identified_joint(compare, joint)
     if single_record or model == "rational":
         return _run_single(path, out, input=input, output=output, reference=reference, time=time, model=model,
                            order=order, single_record=single_record, periodic=steady_period)
@@ -161,8 +171,58 @@ def run_frf(path, out, *, input: str, output: str, reference: str | None = None,
                "model": None if fit is None else fit.to_dict(),
                "modes": [] if fit is None else [m.to_dict() for m in fit.modes],
                "files": {"summary": "frf.json", "frf": "frf.csv"}}
+    if reference_ident is not None and fit is not None:
+        summary["comparison"] = compare_with_identify(summary, *reference_ident)
     _write(out, summary, frf, fit)
     return summary
+
+
+def read_identified_joint(path, joint: str | None = None) -> tuple[str, dict, str]:
+    """(joint name, its ``params``, the file) from an identify.json, the directory holding it, or a
+    run directory (``identify/identify.json``)."""
+    from ..io import read_json
+
+    p = Path(path)
+    if p.is_dir():
+        p = p / "identify.json" if (p / "identify.json").is_file() else p / "identify" / "identify.json"
+    if not p.is_file():
+        raise InputError(path, "compare", "an identify.json, its directory or a run directory", "no identify.json")
+    try:
+        doc = read_json(p)
+    except ValueError as e:
+        raise InputError(p, "JSON", "the identify.json mocapfj writes", str(e).split("\n")[0]) from None
+    joints = [j for j in doc.get("joints", []) if isinstance(j, dict) and isinstance(j.get("params"), dict)]
+    if not joints:
+        raise InputError(p, "joints", "an identified flexible joint with params", "none")
+    names = [j.get("name") for j in joints]
+    if joint is None:
+        if len(joints) > 1:
+            raise InputError(p, "joints", "one joint, or --joint naming one", names)
+        return names[0], joints[0]["params"], str(p)
+    if joint not in names:
+        raise InputError(p, "joints", f"one of {names}", repr(joint))
+    return joint, joints[names.index(joint)]["params"], str(p)
+
+
+def compare_with_identify(summary: dict, joint: str, params: dict, source: str) -> dict:
+    """The FRF's two-inertia parameters against the time-domain identification of the joint, and
+    the modes that identification predicts (spring damping 0: it has none) against the FRF's."""
+    from ..ident.crosscheck import cross_check
+    from ..ident.frf_fit import two_inertia_modes
+
+    c = cross_check(summary["model"]["params"], params, method_a="frf", method_b="identify", joint=joint,
+                    names=("k", "J", "I", "b", "v"))
+    out = {"source": source, **c.to_dict(), "lines": c.lines()}
+    try:
+        pv = {n: float(params[n]["value"]) for n in ("J", "I", "k", "b", "v")}
+        pred = two_inertia_modes(J=pv["J"], I=pv["I"], k=pv["k"], d=0.0, b=pv["b"], v=pv["v"])
+        by_kind = {kind: f for kind, f, _ in pred}
+        out["modes"] = [{"kind": m["kind"], "f_hz_frf": m["f_hz"], "f_hz_std_frf": m.get("f_hz_std"),
+                         "f_hz_identify": by_kind[m["kind"]], "diff_pct": 100.0 * (m["f_hz"] / by_kind[m["kind"]] - 1.0)}
+                        for m in summary["modes"] if m["kind"] in by_kind]
+    except (KeyError, TypeError, ValueError):
+        out["modes"] = []
+    return out
 
 
 def _run_single(path, out, *, input, output, reference, time, model, order, single_record, periodic=False) -> dict:

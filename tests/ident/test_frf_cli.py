@@ -121,3 +121,40 @@ def test_period_found_from_a_noisy_input_or_a_ramped_reference():
     for a in (0.1, 0.3, 0.6):
         assert find_period(x + rng.normal(0, a * x.std(), x.size), exact=False) == 1024
     assert find_period(rng.normal(size=5000), exact=False) is None
+
+
+def _identify_json(path, params, determined=()):
+    """An identify.json of the joint (the keys mocapfj identify writes for params)."""
+    doc = {"recordings": ["r"], "joints": [{"name": "j1", "params": {
+        n: {"value": v, "std": s, "rel_std_pct": 100 * s / abs(v), "determined": n not in determined,
+            **({"reason": "only I + J is determined"} if n in determined else {})}
+        for n, (v, s) in params.items()}}]}
+    path.write_text(json.dumps(doc))
+    return path
+
+
+def test_compare_with_the_time_domain_identification(record, capsys, tmp_path):
+    """The truth as a time-domain result with 1 % SDs agrees; k 10 % off at a 1 % SD is named as a
+    disagreement; a parameter identify did not determine is not compared; the modes identify's
+    parameters predict are within 1 % of the FRF's (the plant has d = 1, identify's model none)."""
+    d, _ = record
+    truth = {n: (P[n], 0.01 * P[n]) for n in ("J", "I", "k", "b", "v")}
+    good = _identify_json(tmp_path / "good.json", truth, determined=("I",))
+    code, out, err = _run(capsys, d / "log.csv", "--input", "tau", "--output", "qm", "--reference", "qref",
+                          "--compare", good, "--out", tmp_path / "o", "--json")
+    assert code == 0, err
+    c = json.loads(out)["comparison"]
+    st = {p["name"]: p for p in c["params"]}
+    assert st["k"]["status"] == "agree" and st["J"]["status"] == "agree" and abs(st["k"]["z"]) < 3
+    assert st["I"]["status"] == "not_compared" and "only I + J" in st["I"]["reason"]
+    assert c["disagree"] == [] and c["verdict"].startswith("frf and identify agree on k, J")
+    assert [m["kind"] for m in c["modes"]] == ["antiresonance", "resonance"]
+    assert all(abs(m["diff_pct"]) < 1.0 for m in c["modes"])
+    bad = _identify_json(tmp_path / "bad.json", {**truth, "k": (1.1 * P["k"], 0.01 * P["k"])})
+    code, out, err = _run(capsys, d / "log.csv", "--input", "tau", "--output", "qm", "--reference", "qref",
+                          "--compare", bad, "--out", tmp_path / "o2")
+    assert code == 0, err
+    assert "disagree on k" in out and "k: frf" in out and "-9." in out      # about -9 % against identify's k
+    code, out, err = _run(capsys, d / "log.csv", "--input", "tau", "--output", "qm", "--single-record",
+                          "--compare", good, "--out", tmp_path / "o3")
+    assert code == 2 and "compare" in err and err.count("\n") == 1
