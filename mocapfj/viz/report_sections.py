@@ -401,6 +401,23 @@ def _frf_section(root: Path, d: dict, path: Path) -> Section:
         blocks.append(Table(("mode", "frequency (Hz)", "damping ratio"),
                             tuple((m["kind"], pm(m["f_hz"], m.get("f_hz_std")), pm(m["zeta"], m.get("zeta_std")))
                                   for m in modes)))
+    cmp_ = d.get("comparison")
+    if cmp_:
+        text = (f"Against the time-domain identification of {cmp_['joint']} "
+                f"({Path(str(cmp_.get('source', ''))).name}): {cmp_['verdict']}.")
+        blocks.append(Note(text, "warn") if cmp_.get("disagree") else Paragraph(text))
+        rows = []
+        for p in cmp_["params"]:
+            unit = UNITS.get(p["name"], "")
+            if p["status"] == "not_compared":
+                rows.append((p["name"], unit, pm(p["a"], p["a_std"]), pm(p["b"], p["b_std"]), "", "", p["reason"] or ""))
+            else:
+                rows.append((p["name"], unit, pm(p["a"], p["a_std"]), pm(p["b"], p["b_std"]), fmt(p["diff_pct"], 3),
+                             fmt(p["z"], 2), p["status"]))
+        rows += [(m["kind"], "Hz", fmt(m["f_hz_frf"], 5), fmt(m["f_hz_identify"], 5) + " (predicted)",
+                  fmt(m["diff_pct"], 3), "", "") for m in cmp_.get("modes") or []]
+        blocks.append(Table(("parameter", "unit", "FRF", "identify", "difference (%)", "in SDs", "verdict"),
+                            tuple(rows)))
     csv = root / ((d.get("files") or {}).get("frf") or "frf.csv")
     if csv.is_file():
         c = read_columns(csv)

@@ -129,6 +129,11 @@ def _frf(d: Path) -> dict:
            "model": model, "modes": [{"kind": "antiresonance", "f_hz": 5.0005, "zeta": 0.0178, "f_hz_std": 0.001,
                                       "zeta_std": 0.0002}],
            "files": {"summary": "frf.json", "frf": "frf.csv"}}
+    from mocapfj.pipeline.frf import compare_with_identify
+
+    ident = {n: {"value": v * (1.08 if n == "k" else 1.0), "std": 0.005 * v, "determined": n != "I",
+                 "reason": "only I + J is determined"} for n, v in p.items()}
+    out["comparison"] = compare_with_identify(out, "j1", ident, "identify.json")
     write_json(d / "frf.json", out)
     return out
 
@@ -363,3 +368,14 @@ def test_cli_report_subprocess(run, tmp_path):
                        cwd=ROOT, timeout=120)
     assert r.returncode == 2 and r.stdout == "" and r.stderr.count("\n") == 1
     assert str(d / "identify.json") in r.stderr and "Traceback" not in r.stderr
+
+
+def test_a_disagreement_with_the_time_domain_identification_is_said(run):
+    d, result, _, frf = run
+    text = result.html.read_text()
+    p = _parse(result.html)
+    assert "frf and identify disagree on k" in text
+    rows = {r[0]: r for r in p.rows if len(r) == 7}                   # the comparison's table
+    assert rows["k"][-1] == "disagree" and rows["k"][1] == "N m/rad"
+    assert float(rows["k"][4]) == pytest.approx(frf["comparison"]["params"][0]["diff_pct"], rel=1e-2)
+    assert rows["J"][-1] == "agree" and rows["I"][-1].startswith("identify did not determine it: only I + J")
