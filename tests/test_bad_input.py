@@ -10,6 +10,7 @@ import sys
 import numpy as np
 import pytest
 
+from mocapfj.errors import InputError
 from mocapfj.io import write_recording
 from mocapfj.synth import toy_recording
 
@@ -273,6 +274,26 @@ def test_a_motor_angle_in_the_wrong_unit(bundle, tmp_path, scale, says):
     qm = next(c for c in head if c.startswith("qm"))
     _one_line_error(_cli("joints", b, "--out", tmp_path / "o"), f"{csv.name}: {qm} (joint",
                     "expected a motor angle on the link side", says)
+
+
+def test_a_link_resonating_under_a_fast_excitation_is_not_a_wrong_unit():
+    """A multisine through the joint's resonance moves the link 7x more than the motor at 6 Hz:
+    the scale is judged below 1 Hz, where the link follows the motor (slope 1: no error); the
+    same record with q_m in degrees is still refused."""
+    from types import SimpleNamespace
+
+    from mocapfj.joints.stage import _check_motor_scale
+
+    fs = 250.0
+    t = np.arange(int(30 * fs)) / fs
+    q_m = 0.1 * np.sin(2 * np.pi * 0.3 * t) + 0.02 * np.sin(2 * np.pi * 6.0 * t)
+    q = 0.1 * np.sin(2 * np.pi * 0.3 * t) + 0.14 * np.sin(2 * np.pi * 6.0 * t + 0.4)
+    rec = SimpleNamespace(markers=SimpleNamespace(rate_hz=fs), root=None, controller_file="")
+    spec = SimpleNamespace(gear_ratio=50.0, motor_position="qm_j2", name="j2")
+    assert abs(float(np.polyfit(q, q_m, 1)[0]) - 1) > 0.5                 # unfiltered it would look wrong
+    _check_motor_scale(rec, spec, q, q_m)
+    with pytest.raises(InputError, match="q_m looks like degrees"):
+        _check_motor_scale(rec, spec, q, np.degrees(q_m))
 
 
 def test_swapped_labels_and_a_spike_are_repaired_and_reported(bundle, tmp_path):

@@ -131,6 +131,10 @@ MOTOR_SCALE_RANGE = (0.8, 1.25)
 the deflection only, a fraction of a percent of the motion in a geared joint."""
 
 
+SCALE_CUTOFF_HZ = 1.0
+"""The scale check compares the two angles below this frequency (zero-phase low-pass)."""
+
+
 def _check_motor_scale(rec: Recording, spec, q: np.ndarray, q_m: np.ndarray) -> None:
     """The motor angle moves as the link does (q_m = q + deflection): its slope against the mocap
     angle is 1. Degrees for radians, the motor side for the link side (a missing gear ratio), or a
@@ -139,6 +143,14 @@ def _check_motor_scale(rec: Recording, spec, q: np.ndarray, q_m: np.ndarray) -> 
     if ok.sum() < 10:
         return
     qq, mm = q[ok] - q[ok].mean(), q_m[ok] - q_m[ok].mean()
+    rate = rec.markers.rate_hz if rec.markers is not None else None
+    if rate and qq.size > 3 * int(rate / SCALE_CUTOFF_HZ):
+        # below SCALE_CUTOFF_HZ the link follows the motor (a joint's resonance lies well above):
+        # a fast excitation (a multisine through the resonance) moves the link more than the motor
+        from scipy.signal import butter, sosfiltfilt
+
+        sos = butter(2, SCALE_CUTOFF_HZ / (0.5 * rate), output="sos")
+        qq, mm = sosfiltfilt(sos, qq), sosfiltfilt(sos, mm)
     if np.ptp(qq) < np.radians(5.0) or not float(qq @ qq) > 0:
         return                                   # too little motion to judge the scale
     slope = float(qq @ mm) / float(qq @ qq)
