@@ -63,7 +63,7 @@ def _calibrate_rig(true_rig, out: Path, rng: np.random.Generator) -> dict:
 
     wand_file = default_scenario("pa10_joint2").parents[1] / "calibration" / "wands" / "wand_3marker_500mm.toml"
     wand = read_wand(wand_file)
-    raw = out / "wand"
+    raw = out / "calibrate_rig" / "wand"     # the wave and the L-frame as the cameras saw them
     raw.mkdir(parents=True, exist_ok=True)
     write_rig(raw / "intrinsics.toml", Rig(tuple(Camera(c.name, c.size, c.K, c.dist, np.eye(3), np.zeros(3))
                                                  for c in true_rig.cameras), {"units": "m"}))
@@ -88,9 +88,9 @@ def run_demo(out: str | Path, duration_s: float | None = None,
              progress: Callable[[str], None] | None = None) -> dict:
     """Simulate, calibrate, triangulate, identify, discover and report (module docstring).
 
-    Writes OUT/simulation/<trial> (the simulator's bundles with their truth), OUT/calibrate_rig
-    (the wand calibration), OUT/recordings/<trial> (the camera bundles), OUT/run (the run
-    directory of ``mocapfj run``: report.html, recording.rrd, each stage's results) and
+    Writes OUT/simulation/<trial> (the simulator's bundles with their truth), OUT/recordings/<trial>
+    (the camera bundles), OUT/run (the run directory of ``mocapfj run``: report.html,
+    recording.rrd, each stage's results, and calibrate_rig/ with the wand wave in wand/) and
     OUT/demo.json (the planted effect, what discovery named, the fits). Returns demo.json's
     contents.
     """
@@ -100,7 +100,11 @@ def run_demo(out: str | Path, duration_s: float | None = None,
     from .core import default_scenario
     from .run import run_pipeline
 
+    from ..io.outdir import MARKER
+
     out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    (out / MARKER).touch()
     say = progress or (lambda line: None)
     t0 = time.perf_counter()
     timings = {}
@@ -122,8 +126,9 @@ def run_demo(out: str | Path, duration_s: float | None = None,
     t1 = time.perf_counter()
     say("calibrating the rig from a wand wave ...")
     true_rig = sims[0].recording.rig
-    cal = _calibrate_rig(true_rig, out, np.random.default_rng(np.random.SeedSequence([scns[0].seed, 11])))
-    rig = read_rig(out / "calibrate_rig" / "rig.toml")
+    # into the run directory, so the report's calibration section holds it
+    cal = _calibrate_rig(true_rig, out / "run", np.random.default_rng(np.random.SeedSequence([scns[0].seed, 11])))
+    rig = read_rig(out / "run" / "calibrate_rig" / "rig.toml")
     timings["calibrate_rig_s"] = time.perf_counter() - t1
 
     bundles = [_camera_bundle(sr, scn, rig, out / "recordings" / scn.name) for sr, scn in zip(sims, scns)]

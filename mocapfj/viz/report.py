@@ -28,7 +28,8 @@ STAGE_FILES = {"calibrate_rig": "calibrate_rig.json", "triangulate": "triangulat
                "identify": "identify.json", "discover": "discovery.json", "frf": "frf.json"}
 _WHAT = {"calibrate_rig": "rig calibration", "triangulate": "3D markers from 2D detections",
          "joints": "joint axes, angles and deflection", "identify": "flexible-joint identification",
-         "discover": "missing-physics discovery", "frf": "frequency response"}
+         "discover": "missing-physics discovery", "frf": "frequency response",
+         "recording": "the rerun recording (recording.rrd)", "report": "this report"}
 FIGURES_DIR = "report_files"
 
 
@@ -151,7 +152,8 @@ def _recording_section(files: RunFiles) -> Section | None:
         if not path:
             continue
         if not Path(path).exists():
-            blocks.append(Note(f"The {role} recording named in run.json ({path}) is not there: its summary is left out.",
+            name = "The recording" if role == "recording" else "The validation recording"
+            blocks.append(Note(f"{name} named in run.json ({path}) is not there: its summary is left out.",
                                "warn"))
             continue
         blocks += recording_blocks(inspect_path(path), role, path)

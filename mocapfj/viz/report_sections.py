@@ -346,8 +346,10 @@ def _spring_section(files, j: dict) -> Section | None:
     rate = F.smooth_derivatives(tau_s, dt, 0.1)[0]           # N m/s; at rest (below 10 % of its RMS) left out
     direction = np.where(np.abs(rate) < 0.1 * np.sqrt(np.nanmean(rate ** 2)), np.nan, np.sign(rate))
     ident = j["params"]
-    rows = tuple((p, pm(v, (ident.get(p) or {}).get("std")) if p in ident else fmt(v, 6), UNITS.get(p, ""))
-                 for p, v in (spring.get("params") or {}).items())
+    sp = spring.get("params") or {}
+    rows = tuple((p, pm(v, (ident.get(p) or {}).get("std")) if p in ident else pm(v, sp.get(f"{p}_std"))
+                  if sp.get(f"{p}_std") is not None else fmt(v, 6), UNITS.get(p, ""))
+                 for p, v in sp.items() if not p.endswith("_std"))
     blocks = [Paragraph(f"Spring model {spring.get('model')}"
                         + (f", R² {fmt(spring['r2'], 6)}" if spring.get("r2") is not None else "") + "."),
               Table(("spring parameter", "value (± SD)", "unit"), rows),
