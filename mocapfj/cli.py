@@ -605,7 +605,7 @@ def build_parser() -> argparse.ArgumentParser:
     d.add_argument("--out", default="demo_out", help="output directory (default: demo_out)")
     d.add_argument("--duration", type=float, default=None, help="shorten the 60 s demo recording, s")
     d.add_argument("--json", action="store_true", help="print a JSON summary on stdout")
-    d.set_defaults(func=_cmd_demo)
+    d.set_defaults(func=_cmd_demo, in_place=True)      # the run inside is resumable; its paths stay true
 
     rn = sub.add_parser("run", help="every stage that applies, from a recording to a report",
                         description="triangulate (a bundle of cameras' detections), joints, identify, discover, "
