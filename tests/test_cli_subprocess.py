@@ -253,3 +253,16 @@ def test_report(tmp_path):
     _bad(_cli("report", tmp_path / "missing"), "missing", "no such directory")
     (tmp_path / "empty").mkdir()
     _bad(_cli("report", tmp_path / "empty"), "empty", "none of them")
+
+
+def test_run_bad_input(files, tmp_path):
+    """Its real runs (every stage, resuming, a failing stage): in process in tests/pipeline/test_run.py."""
+    _bad(_cli("run", files / "toy", "--out", tmp_path / "o", "--stages", "nonsense"), "--stages", "nonsense",
+         out=tmp_path / "o")
+
+
+def test_batch_bad_input(files, tmp_path):
+    """Its real runs on a two-worker Dask cluster (and the CLI's exit 1 for a failed recording):
+    tests/pipeline/test_batch.py."""
+    _bad(_cli("batch", files / "toy", tmp_path / "missing", "--out", tmp_path / "o"), "missing", "RECORDING",
+         out=tmp_path / "o")

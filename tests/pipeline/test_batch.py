@@ -173,8 +173,22 @@ def test_a_worker_killed_mid_batch_is_replaced_and_the_batch_completes(cluster, 
         assert _files(tmp_path / "o" / t.name) == _files(out0 / t.name)
 
 
-def test_cli_bad_input_exits_2(trials, tmp_path):
-    r = subprocess.run([sys.executable, "-m", "mocapfj.cli", "batch", str(trials[0]), str(tmp_path / "missing"),
-                        "--out", str(tmp_path / "o")], capture_output=True, text=True, timeout=60)
+def _cli(*args):
+    return subprocess.run([sys.executable, "-m", "mocapfj.cli", "batch", *map(str, args)], capture_output=True,
+                          text=True, timeout=120)
+
+
+def test_cli_a_failed_recording_exits_1_and_bad_input_2(trials, tmp_path):
+    """As a shell runs it (the workers spawned from the command): the short trial through a
+    one-worker cluster is reported on stderr and in the JSON, the files are written, exit 1."""
+    r = _cli(trials[-1], "--out", tmp_path / "o", "--workers", "1", "--json")
+    assert r.returncode == 1, r.stderr[-2000:]
+    s = json.loads(r.stdout)
+    assert s["n_failed"] == 1 and s["failed"][0]["stage"] == "joints" and s["cluster"].startswith("local cluster of 1")
+    assert "[1/1] short: FAILED at joints: " in r.stderr and "Traceback" not in r.stderr
+    assert (tmp_path / "o" / "batch.json").is_file() and (tmp_path / "o" / "batch.md").is_file()
+    r = _cli(trials[0], tmp_path / "missing", "--out", tmp_path / "x")
     assert r.returncode == 2 and r.stdout == "" and r.stderr.count("\n") == 1, r.stderr
-    assert "missing: RECORDING: expected a bundle directory" in r.stderr and not (tmp_path / "o").exists()
+    assert "missing: RECORDING: expected a bundle directory" in r.stderr and not (tmp_path / "x").exists()
+    r = _cli(trials[0], trials[0] / "recording.toml", "--out", tmp_path / "x")
+    assert r.returncode == 2 and "the same bundle as" in r.stderr and not (tmp_path / "x").exists()
