@@ -67,10 +67,20 @@ def trials(tmp_path_factory):
 
 
 @pytest.fixture(scope="module")
-def batch(trials, tmp_path_factory):
+def cluster():
+    """A local cluster of two single-threaded worker processes, reached by its address (as an
+    existing cluster is); the kill test kills one of its workers (its nanny starts a new one).
+    The cluster run_batch starts itself (no address) is what the CLI test runs."""
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, host="127.0.0.1",
+                                  dashboard_address=":0", silence_logs=logging.ERROR) as cl:
+        yield cl
+
+
+@pytest.fixture(scope="module")
+def batch(trials, cluster, tmp_path_factory):
     out = tmp_path_factory.mktemp("batch") / "out"
     lines = []
-    r = run_batch(trials, out, method=METHOD, workers=2, progress=lines.append)
+    r = run_batch(trials, out, method=METHOD, scheduler=cluster.scheduler_address, progress=lines.append)
     return r, out, lines
 
 
@@ -78,9 +88,9 @@ def _files(d: Path) -> dict:
     return {p.relative_to(d).as_posix(): p.read_bytes() for p in sorted(d.rglob("*")) if p.is_file()}
 
 
-def test_two_workers_give_exactly_the_numbers_of_ten_sequential_runs(batch, trials, tmp_path):
+def test_two_workers_give_exactly_the_numbers_of_ten_sequential_runs(batch, cluster, trials, tmp_path):
     r, out, lines = batch
-    assert r.cluster.startswith("local cluster of 2 worker processes")
+    assert r.cluster == f"scheduler {cluster.scheduler_address} (2 workers at start)"
     assert len({t.worker for t in r.trials if t.worker}) == 2                  # both workers took tasks
     seq = {}
     for p in trials[:N]:
@@ -130,15 +140,6 @@ def test_a_bad_recording_is_reported_and_the_others_finish(batch):
     assert doc["n_failed"] == 1 and doc["failed"][0]["name"] == "short"
 
 
-@pytest.fixture()
-def cluster():
-    """A two-worker cluster of the test's own, the "existing scheduler" of the kill test (the
-    nanny of the killed worker starts a new process)."""
-    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, host="127.0.0.1",
-                                  dashboard_address=":0", silence_logs=logging.ERROR) as cl:
-        yield cl
-
-
 def test_a_worker_killed_mid_batch_is_replaced_and_the_batch_completes(cluster, trials, batch, tmp_path):
     """SIGKILL of a worker process while it runs a task: Dask reschedules the task on the other
     worker (the nanny starts a new process) and every recording finishes, with the numbers of the
@@ -181,7 +182,7 @@ def _cli(*args):
 def test_cli_a_failed_recording_exits_1_and_bad_input_2(trials, tmp_path):
     """As a shell runs it (the workers spawned from the command): the short trial through a
     one-worker cluster is reported on stderr and in the JSON, the files are written, exit 1."""
-    r = _cli(trials[-1], "--out", tmp_path / "o", "--workers", "1", "--json")
+    r = _cli(trials[-1], "--out", tmp_path / "o", "--workers", "1", "--json")           # the default: a new cluster
     assert r.returncode == 1, r.stderr[-2000:]
     s = json.loads(r.stdout)
     assert s["n_failed"] == 1 and s["failed"][0]["stage"] == "joints" and s["cluster"].startswith("local cluster of 1")
