@@ -17,7 +17,7 @@ from . import __version__
 from .errors import InputError
 from .io import to_jsonable
 
-IDENTIFY_METHODS = ("motor_first", "two_step")   # mocapfj.ident.IDENTIFY_METHODS, without importing ident
+IDENTIFY_METHODS = ("output_error", "motor_first", "two_step")   # mocapfj.ident.IDENTIFY_METHODS (not imported here)
 
 def _work(args):
     """Where a command writes: the staging directory main() made beside --out."""
@@ -88,6 +88,9 @@ def _cmd_demo(args) -> int:
                  f"{r['wand_length_sd_mm']:.2f} mm, camera centres within {r['camera_centre_error_max_mm']:.1f} mm "
                  "of the truth"]
         lines.append(_human_run_stages(s["run"]))
+        for j in s.get("joints_fit", []):
+            lines.append(f"  {j['name']}: deflection through the cameras within {j['deflection_error_rms_rad'] * 1e3:.3f} "
+                         f"mrad RMS of the truth (Cramer-Rao bound {j['deflection_error_bound_rad'] * 1e3:.3f} mrad)")
         if "found" in s:
             named = ", ".join(f"{e['name']} on {e['joint']}" for e in s["found"]) or "nothing"
             lines.append(f"  discovery named: {named}; planted effects named: {', '.join(s['named_planted']) or 'none'}")
@@ -95,12 +98,16 @@ def _cmd_demo(args) -> int:
                 v = (s.get("validation") or {}).get("fit_before", {}).get(j), (s.get("validation") or {}).get("fit_after", {}).get(j)
                 lines.append(f"  {j}: fit {f['before']:.2f} % -> {f['after']:.2f} %"
                              + (f"; on the validation trial {v[0]:.2f} % -> {v[1]:.2f} %" if v[0] is not None else ""))
-        lines.append(f"  {s['timings_s']['total_s']:.0f} s; look at {args.out}/run/report.html "
-                     f"(and 'mocapfj view {args.out}/run'); summary {args.out}/demo.json")
+        failed = s["run"]["failed"]
+        if failed:
+            lines.append(f"  the demo stopped: stage {failed} failed (above); {args.out}/demo.json says how far it got")
+        else:
+            lines.append(f"  {s['timings_s']['total_s']:.0f} s; " + _where_to_look(Path(args.out) / "run")
+                         + f"; summary {args.out}/demo.json")
         return "\n".join(lines)
 
     _emit(args, s, human)
-    return 0
+    return 1 if s["run"]["failed"] else 0
 
 
 def _progress(args):
@@ -123,6 +130,16 @@ def _human_run_stages(s: dict) -> str:
     return "\n".join(lines)
 
 
+def _where_to_look(out) -> str:
+    """The closing line of run and demo: the report, the recording, else the results."""
+    out = Path(out)
+    look = [str(out / f) for f in ("report.html", "recording.rrd") if (out / f).is_file()]
+    if not look:
+        return f"results in {out}/<stage>/ (run.json lists them)"
+    return "look at " + " and ".join(look) + (f" ('mocapfj view {out}' opens the recording)"
+                                               if (out / "recording.rrd").is_file() else "")
+
+
 def _cmd_run(args) -> int:
     from .pipeline.run import STAGES, run_pipeline
 
@@ -143,9 +160,7 @@ def _cmd_run(args) -> int:
             lines.append(f"  stage {s['failed']} failed; the stages before it are in {args.out}; fix the input and "
                          "run again: finished stages whose inputs did not change are kept")
         else:
-            look = [f for f in ("report.html", "recording.rrd") if (Path(args.out) / f).is_file()]
-            lines.append(f"  look at {args.out}/" + (f" and {args.out}/".join(look) if look else "")
-                         + " ('mocapfj view " + str(args.out) + "' opens the recording)" * ("recording.rrd" in look))
+            lines.append("  " + _where_to_look(args.out))
         return "\n".join(lines)
 
     _emit(args, s, human)
@@ -603,7 +618,8 @@ def build_parser() -> argparse.ArgumentParser:
                                    "controller log, calibrates the rig from a wand wave, then runs every stage "
                                    "(mocapfj run) into OUT/run: report.html, recording.rrd. About 2-3 minutes.")
     d.add_argument("--out", default="demo_out", help="output directory (default: demo_out)")
-    d.add_argument("--duration", type=float, default=None, help="shorten the 60 s demo recording, s")
+    d.add_argument("--duration", type=float, default=30.0,
+                   help="seconds of each trial (default 30; the scenarios are 60 s; the effect is named from about 12 s)")
     d.add_argument("--json", action="store_true", help="print a JSON summary on stdout")
     d.set_defaults(func=_cmd_demo, in_place=True)      # the run inside is resumable; its paths stay true
 
@@ -855,7 +871,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     ba = sub.add_parser("batch", help="many recordings in parallel on Dask, parameters across repeated trials",
                         description="One Dask task per recording (joints and identify, into OUT/<recording>/), "
-                                    "then the mean, SD and CV %% of every parameter across the repeated trials "
+                                    "then the mean, SD and CV % of every parameter across the repeated trials "
                                     "of each joint (OUT/batch.json, batch.csv, trials.csv, batch.md). A failed "
                                     "recording is reported and the others finish (exit 1). docs/batch.md.")
     ba.add_argument("recordings", nargs="+", metavar="RECORDING", help="recording bundles (directories or recording.toml)")
@@ -864,7 +880,7 @@ def build_parser() -> argparse.ArgumentParser:
                     help="an existing Dask scheduler, e.g. tcp://host:8786 (default: a local cluster)")
     ba.add_argument("--workers", type=int, default=None, metavar="N",
                     help="worker processes of the local cluster, one thread each (default: the cores, at most 4)")
-    ba.add_argument("--method", default="output_error", choices=list(dict.fromkeys(["output_error", *IDENTIFY_METHODS])),
+    ba.add_argument("--method", default="output_error", choices=list(IDENTIFY_METHODS),
                     help="identification method (as identify --method; two_step is Lightcap and Banks 2007's)")
     ba.add_argument("--json", action="store_true", help="print a JSON summary on stdout")
     ba.set_defaults(func=_cmd_batch)
