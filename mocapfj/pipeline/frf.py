@@ -213,6 +213,12 @@ def compare_with_identify(summary: dict, joint: str, params: dict, source: str) 
     c = cross_check(summary["model"]["params"], params, method_a="frf", method_b="identify", joint=joint,
                     names=("k", "J", "I", "b", "v"))
     out = {"source": source, **c.to_dict(), "lines": c.lines()}
+    coulomb = params.get("c") if isinstance(params.get("c"), dict) else None
+    if "v" in c.disagree and coulomb and coulomb.get("determined", True) and coulomb.get("value", 0) > 0:
+        note = (f"identify's link Coulomb friction (c {coulomb['value']:.4g} N m) is, to the linear model the FRF fits, "
+                "extra viscous damping: the FRF's v holds both")
+        out["notes"] = [note]
+        out["lines"] = out["lines"] + [f"v: {note}"]
     try:
         pv = {n: float(params[n]["value"]) for n in ("J", "I", "k", "b", "v")}
         pred = two_inertia_modes(J=pv["J"], I=pv["I"], k=pv["k"], d=0.0, b=pv["b"], v=pv["v"])

@@ -420,6 +420,7 @@ def _frf_section(root: Path, d: dict, path: Path) -> Section:
                   fmt(m["diff_pct"], 3), "", "") for m in cmp_.get("modes") or []]
         blocks.append(Table(("parameter", "unit", "FRF", "identify", "difference (%)", "in SDs", "verdict"),
                             tuple(rows)))
+        blocks += [Paragraph(n[0].upper() + n[1:] + ".") for n in cmp_.get("notes") or []]
     csv = root / ((d.get("files") or {}).get("frf") or "frf.csv")
     if csv.is_file():
         c = read_columns(csv)
