@@ -3,8 +3,9 @@ identified parameters across repeated trials of each joint.
 
 Lightcap and Banks (2007) identify each joint from 10 repeated trials and report the mean and
 the coefficient of variation (CV %) of every parameter; :func:`run_batch` does that for any set
-of recordings: each task runs the per-recording stages (:func:`_task`) in a worker, the client
-writes each recording's files under ``OUT/<name>/`` as they finish and gathers the parameters
+of recordings: each task runs ``mocapfj run`` on one recording in a worker (:func:`_task`, the
+stages that apply or those asked for), the client writes its run directory as ``OUT/<name>/`` as
+tasks finish and gathers the parameters
 into ``OUT/batch.json``, ``batch.csv``, ``trials.csv`` and ``batch.md``.
 
 The cluster: a local one of N single-threaded worker processes by default, or an existing
@@ -34,7 +35,7 @@ __all__ = ["BATCH_FORMAT", "STAGES", "BatchResult", "Trial", "run_batch", "summa
            "trial_group"]
 
 BATCH_FORMAT = "mocapfj.batch/1"
-STAGES = ("joints", "identify")          # what each task runs (the run stages that give parameters)
+STAGES = ("triangulate", "joints", "identify", "discover", "recording", "report")   # mocapfj run's, the default
 METHODS = ("output_error", "motor_first", "two_step")     # mocapfj.ident.IDENTIFY_METHODS, without importing ident
 PARAMS = ("I", "mglx", "mgly", "c", "v", "J", "b", "k")   # Lightcap and Banks (2007), Table I order
 
@@ -48,48 +49,55 @@ def _one_line(e: BaseException) -> str:
     return " ".join(text.split())[:400] or type(e).__name__
 
 
-def _task(recording: str, out_dir: str, method: str = "output_error") -> dict:
-    """The per-recording stages into `out_dir` (``joints/`` and ``identify/``, as ``mocapfj run``
-    lays them out), identified by `method` (:func:`mocapfj.identify`). Returns {"status": "done" or
-    "failed", "stage", "error", "name" (the recording's own name), "identify" (the
-    Identification's to_dict())}. Never raises for a bad recording.
+def _recording_name(recording: str) -> str | None:
+    """recording.toml's ``name`` (read without loading the bundle), else None."""
+    import tomllib
 
-    The single place to switch to :func:`mocapfj.pipeline.run.run_pipeline` once every run stage
-    is wanted per recording."""
-    from ..api import identify
-    from ..io import load_recording, write_json
-    from ..joints.stage import calibrate_joints
-    from .core import write_joints
-    from .identify import write_tables
-
-    out = Path(out_dir)
-    stage, name = "load", None
+    p = Path(recording)
+    toml = p if p.name == "recording.toml" else p / "recording.toml"
     try:
-        rec = load_recording(recording)
-        name = rec.name
-        stage = "joints"
-        cal = None
-        if rec.markers is not None:
-            cal = calibrate_joints(rec)
-            write_joints(cal, out / "joints")
-        stage = "identify"
-        ident = identify([rec], method=method, calibrations=None if cal is None else [cal])
-        summary = ident.to_dict()
-        summary["recordings"] = [str(rec.root)]
-        write_json(out / "identify" / "identify.json", summary)
-        write_tables(summary, out / "identify")
-    except Exception as e:                                  # a bad recording is a result, not a crash
-        return {"status": "failed", "stage": stage, "error": _one_line(e), "name": name, "identify": None}
-    return {"status": "done", "stage": None, "error": None, "name": name, "identify": summary}
+        name = tomllib.loads(toml.read_text(encoding="utf-8")).get("name")
+    except (OSError, ValueError, UnicodeDecodeError):
+        return None
+    return name if isinstance(name, str) and name else None
 
 
-def _remote(recording: str, method: str = "output_error") -> dict:
+def _task(recording: str, out_dir: str, method: str = "output_error", stages: Sequence[str] | None = STAGES) -> dict:
+    """``mocapfj run`` on one recording into `out_dir` (:func:`mocapfj.pipeline.run.run_pipeline`:
+    the `stages` that apply, default :data:`STAGES`; `method` for identify). Returns {"status":
+    "done" or "failed", "stage" and "error" (the failed stage), "name" (the recording's own name),
+    "identify" (the Identification's to_dict(), or None), "stages" (each stage's name, status and
+    reason)}. Never raises for a bad recording."""
+    from ..io import read_json
+    from .run import run_pipeline
+
+    name = _recording_name(recording)
+    try:
+        res = run_pipeline(recording, out_dir, stages=stages, method=method)
+    except Exception as e:                                   # the bundle did not load, or a stage crashed
+        stage = "load"
+        try:
+            manifest = read_json(Path(out_dir) / "run.json")
+            stage = next(s["name"] for s in manifest["stages"] if s["status"] == "pending")
+        except (OSError, ValueError, KeyError, TypeError, StopIteration):
+            pass
+        return {"status": "failed", "stage": stage, "error": _one_line(e), "name": name, "identify": None,
+                "stages": []}
+    done = [{"name": r.name, "status": r.status, "reason": r.reason} for r in res.stages]
+    ident = next((r.summary for r in res.stages if r.name == "identify" and r.status == "done"), None)
+    if res.failed is not None:
+        return {"status": "failed", "stage": res.failed.name, "error": " ".join((res.failed.error or "").split()),
+                "name": name, "identify": ident, "stages": done}
+    return {"status": "done", "stage": None, "error": None, "name": name, "identify": ident, "stages": done}
+
+
+def _remote(recording: str, method: str = "output_error", stages: Sequence[str] | None = STAGES) -> dict:
     """What a Dask task runs: :func:`_task` into a private temporary directory, its files sent
     back as bytes (the client writes them), and where and how long it ran."""
     t0 = time.perf_counter()
     tmp = tempfile.mkdtemp(prefix="mocapfj-batch-")
     try:
-        r = _task(recording, tmp, method)
+        r = _task(recording, tmp, method, stages)
         files = {}
         for p in sorted(Path(tmp).rglob("*")):
             if p.is_file():
@@ -107,7 +115,8 @@ def _remote(recording: str, method: str = "output_error") -> dict:
 @dataclass(frozen=True)
 class Trial:
     """One recording of the batch: `name` (its directory under OUT), the recording's path, the
-    trial group it is a repeat of, and either the identified joints or the failed stage."""
+    trial group it is a repeat of, the identified joints, the failed stage and its error, and each
+    run stage's status (run.json's: done, failed, not_applicable with the reason, ...)."""
 
     name: str
     recording: str
@@ -118,11 +127,12 @@ class Trial:
     seconds: float | None
     worker: str | None
     joints: tuple[dict, ...] = ()
+    stages: tuple[dict, ...] = ()
 
     def to_dict(self) -> dict:
         return {"name": self.name, "recording": self.recording, "group": self.group, "status": self.status,
                 "stage": self.stage, "error": self.error, "seconds": self.seconds, "worker": self.worker,
-                "joints": list(self.joints)}
+                "joints": list(self.joints), "stages": list(self.stages)}
 
 
 @dataclass(frozen=True)
@@ -317,10 +327,12 @@ def _client(scheduler: str | None, workers: int | None):
     return Client(cluster), cluster, f"local cluster of {n} worker processes, 1 thread each"
 
 
-def run_batch(recordings: Sequence, out: str | Path, *, method: str = "output_error", scheduler: str | None = None,
-              workers: int | None = None, progress: Callable[[str], None] | None = None) -> BatchResult:
-    """Every recording's stages (:data:`STAGES`) as one Dask task, their files under
-    ``out/<name>/``, the parameters across repeated trials in ``out/batch.*`` (:func:`write_batch`).
+def run_batch(recordings: Sequence, out: str | Path, *, method: str = "output_error",
+              stages: Sequence[str] | None = None, scheduler: str | None = None, workers: int | None = None,
+              progress: Callable[[str], None] | None = None) -> BatchResult:
+    """``mocapfj run`` on every recording (`stages`, default all that apply: :data:`STAGES`) as one
+    Dask task, its run directory as ``out/<name>/``, the parameters across repeated trials in
+    ``out/batch.*`` (:func:`write_batch`).
 
     `method`: the identification method (output_error, motor_first, two_step: :func:`mocapfj.identify`).
     `scheduler`: an existing Dask scheduler's address; else a local cluster of `workers` processes
@@ -333,6 +345,10 @@ def run_batch(recordings: Sequence, out: str | Path, *, method: str = "output_er
     paths = _check(recordings, workers)
     if method not in METHODS:
         raise InputError(None, "method", f"one of {', '.join(METHODS)}", method)
+    stages = STAGES if stages is None else tuple(stages)
+    unknown = [x for x in stages if x not in STAGES]
+    if unknown or not stages:
+        raise InputError(None, "stages", f"stages among {', '.join(STAGES)}", ", ".join(unknown) or "none")
     names = _names(recordings)
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
@@ -341,7 +357,7 @@ def run_batch(recordings: Sequence, out: str | Path, *, method: str = "output_er
     client, cluster, where = _client(scheduler, workers)
     results: dict[int, dict] = {}
     try:
-        futures = {client.submit(_remote, p, method, key=f"mocapfj-batch-{k:04d}-{names[k]}", pure=False): k
+        futures = {client.submit(_remote, p, method, stages, key=f"mocapfj-batch-{k:04d}-{names[k]}", pure=False): k
                    for k, p in enumerate(paths)}
         say(f"{len(paths)} recording(s) on a {where}")
         for done, fut in enumerate(as_completed(list(futures)), 1):
@@ -366,9 +382,10 @@ def run_batch(recordings: Sequence, out: str | Path, *, method: str = "output_er
                          group=None if results[k]["name"] is None else trial_group(results[k]["name"]),
                          status=results[k]["status"], stage=results[k]["stage"], error=results[k]["error"],
                          seconds=None if results[k]["seconds"] is None else round(results[k]["seconds"], 3),
-                         worker=results[k]["worker"], joints=_joint_rows(results[k]["identify"]))
+                         worker=results[k]["worker"], joints=_joint_rows(results[k]["identify"]),
+                         stages=tuple(results[k].get("stages") or ()))
                    for k in range(len(paths)))
-    result = BatchResult(cluster=where, stages=STAGES, method=method, trials=trials, table=summarize_trials(trials),
+    result = BatchResult(cluster=where, stages=stages, method=method, trials=trials, table=summarize_trials(trials),
                          seconds=round(time.perf_counter() - t0, 3))
     write_batch(result, out)
     return result

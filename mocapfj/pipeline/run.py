@@ -192,7 +192,8 @@ def _stage_identify(ctx: _Context, d: Path):
 
     rec = ctx.markers_from("rec")
     cal = [ctx.calibration("rec")] if rec.markers is not None else None
-    ident = identify([rec], calibrations=cal)
+    method = getattr(ctx, "method", None)
+    ident = identify([rec], calibrations=cal, **({} if method is None else {"method": method}))
     summary = ident.to_dict()
     summary["recordings"] = [str(rec.root)]
     write_json(d / "identify.json", summary)
@@ -282,7 +283,8 @@ def _write_manifest(out: Path, recording, validation, records: Sequence[StageRec
 
 
 def run_pipeline(recording, out: str | Path, validation=None, stages: Sequence[str] | None = None,
-                 progress: Callable[[str], None] | None = None, force: bool = False) -> RunResult:
+                 progress: Callable[[str], None] | None = None, force: bool = False,
+                 method: str | None = None) -> RunResult:
     """Every stage that applies to `recording` (a bundle directory or recording.toml), into `out`.
 
     `validation`: a second recording of the same joint, on which discovery proves its fit gain.
@@ -290,6 +292,7 @@ def run_pipeline(recording, out: str | Path, validation=None, stages: Sequence[s
     requested". `progress(line)` is called as each stage starts and ends. `force`: run every stage
     even when its inputs did not change. A stage that fails is recorded with its error and the
     run stops there: the finished stages' directories stay, and ``run.json`` says which failed.
+    `method`: the identify stage's method (:func:`mocapfj.identify`; default its own).
     """
     from ..io.outdir import MARKER
 
@@ -299,6 +302,7 @@ def run_pipeline(recording, out: str | Path, validation=None, stages: Sequence[s
     if unknown:
         raise InputError(None, "stages", f"stages among {list(STAGES)}", unknown)
     ctx = _Context(out, recording, validation)
+    ctx.method = method
     out.mkdir(parents=True, exist_ok=True)
     (out / MARKER).touch()
     say = progress or (lambda line: None)
@@ -318,6 +322,8 @@ def run_pipeline(recording, out: str | Path, validation=None, stages: Sequence[s
                                        reason=reason or "an earlier stage failed"))
             continue
         digest = _sha(name, base, [digests.get(r) for r in _READS[name]])
+        if name == "identify" and method is not None:
+            digest = _sha(digest, method)
         digests[name] = digest
         d = out / name if name in _OWN_DIR else out
         prev = previous.get(name, {})
