@@ -398,7 +398,9 @@ def _cmd_batch(args) -> int:
     def progress(line):
         print(line, file=sys.stderr, flush=True)
 
-    r = run_batch(args.recordings, _work(args), method=args.method, scheduler=args.scheduler, workers=args.workers, progress=progress)
+    stages = None if args.stages is None else [x.strip() for x in args.stages.split(",") if x.strip()]
+    r = run_batch(args.recordings, _work(args), method=args.method, stages=stages, scheduler=args.scheduler,
+                  workers=args.workers, progress=progress)
     s = r.to_dict()
     s["trials"] = [{k: t[k] for k in ("name", "group", "status", "stage", "error", "seconds")} for t in s["trials"]]
 
@@ -413,8 +415,8 @@ def _cmd_batch(args) -> int:
                          f"{row['n']} trial(s)" + ("" if row["determined"] else " (not determined)"))
         for f in s["failed"]:
             lines.append(f"  FAILED {f['name']} at {f['stage']}: {f['error']}")
-        lines.append(f"  wrote {args.out} (<recording>/joints, <recording>/identify, batch.json, batch.csv, "
-                     "trials.csv, batch.md)")
+        lines.append(f"  wrote {args.out} (a run directory per recording, batch.json, batch.csv, trials.csv, "
+                     "batch.md)")
         return "\n".join(lines)
 
     _emit(args, s, human)
@@ -870,7 +872,7 @@ def build_parser() -> argparse.ArgumentParser:
     rp.set_defaults(func=_cmd_report)
 
     ba = sub.add_parser("batch", help="many recordings in parallel on Dask, parameters across repeated trials",
-                        description="One Dask task per recording (joints and identify, into OUT/<recording>/), "
+                        description="One Dask task per recording (mocapfj run into OUT/<recording>/), "
                                     "then the mean, SD and CV % of every parameter across the repeated trials "
                                     "of each joint (OUT/batch.json, batch.csv, trials.csv, batch.md). A failed "
                                     "recording is reported and the others finish (exit 1). docs/batch.md.")
@@ -880,6 +882,9 @@ def build_parser() -> argparse.ArgumentParser:
                     help="an existing Dask scheduler, e.g. tcp://host:8786 (default: a local cluster)")
     ba.add_argument("--workers", type=int, default=None, metavar="N",
                     help="worker processes of the local cluster, one thread each (default: the cores, at most 4)")
+    ba.add_argument("--stages", default=None,
+                    help="comma-separated stages of mocapfj run (default all that apply; joints,identify for the "
+                         "parameters only)")
     ba.add_argument("--method", default="output_error", choices=list(IDENTIFY_METHODS),
                     help="identification method (as identify --method; two_step is Lightcap and Banks 2007's)")
     ba.add_argument("--json", action="store_true", help="print a JSON summary on stdout")
