@@ -19,7 +19,7 @@ import numpy as np
 import pytest
 
 from mocapfj.cli import build_parser
-from mocapfj.io import read_c3d, read_csv_columns, write_csv_columns, write_recording
+from mocapfj.io import read_c3d, write_csv_columns, write_recording
 from mocapfj.synth import toy_recording
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -175,24 +175,11 @@ def test_triangulate(files, tmp_path):
 
 # -- joint dynamics from CSV logs --------------------------------------------------------------
 
-def test_algebraic(files, tmp_path):
-    s = json.loads(_ok(_cli("algebraic", files / "stop.csv", "--output", "delta", "--start", "0.2", "--out",
-                            tmp_path / "a", "--json")).stdout)
-    a = s["joints"][0]["algebraic"]
-    assert abs(a["omega0"] / W0 - 1) < 0.02 and abs(a["zeta"] / ZETA - 1) < 0.05
+def test_algebraic_and_precompensate_bad_input(files, tmp_path):
+    """Their real runs (omega0 and zeta against the analytic ringing, eq. 17 against the model's
+    response): in process in tests/ident/test_algebraic_cli.py."""
     _bad(_cli("algebraic", files / "stop.csv", "--output", "nope", "--out", tmp_path / "o"), "column 'nope'",
          out=tmp_path / "o")
-
-
-def test_precompensate(files, tmp_path):
-    """Oueslati et al. 2012, eq. 17: command = 2 reference - the model's response to it."""
-    from mocapfj.ident.algebraic import second_order_response
-
-    _ok(_cli("precompensate", files / "stop.csv", "--reference", "ref", "--omega0", W0, "--zeta", ZETA, "--out",
-             tmp_path / "c"))
-    c = read_csv_columns(tmp_path / "c" / "command.csv")
-    y = second_order_response(c["time"], W0, ZETA, c["ref"], y0=c["ref"][0])
-    assert np.allclose(c["command"], 2 * c["ref"] - y, atol=1e-9)
     _bad(_cli("precompensate", files / "stop.csv", "--reference", "ref", "--out", tmp_path / "o"), "--omega0",
          out=tmp_path / "o")
 
@@ -204,40 +191,12 @@ def test_control_check(files):
     _bad(_cli("control-check", PA10, "--joint", "j9"), "j9")
 
 
-def test_clamped(files, tmp_path):
-    """Jubien et al. 2014 on a simulated clamped KR500 (axis 2, k = 7.81e6 N m/rad)."""
-    from mocapfj.ident.clamped import KR500_CONFIGURATIONS, KR500_MDH, mdh_model, simulate_clamped
-
-    m = mdh_model(KR500_MDH, masses=(1200, 600, 450, 100, 60, 30))
-    k = np.array([6.93e6, 7.81e6, 5e6, 1e6, 1e6, 5e5])
-    ex = simulate_clamped(m, np.array(KR500_CONFIGURATIONS[2]), k, np.random.default_rng(3), torque_drift_sd=150.0,
-                          force_drift_sd=45.0)
-    cols = {"time": ex.t, **{f"qm{j + 1}": ex.q_m[:, j] for j in range(6)},
-            **{f"tau{j + 1}": ex.tau_m[:, j] for j in range(6)}}
-    write_csv_columns(tmp_path / "log.csv", cols)
-    pos, tq = ",".join(f"qm{j + 1}" for j in range(6)), ",".join(f"tau{j + 1}" for j in range(6))
-    s = json.loads(_ok(_cli("clamped", tmp_path / "log.csv", "--positions", pos, "--torques", tq, "--mdh", "kr500",
-                            "--joints", "2", "--out", tmp_path / "o", "--json")).stdout)
-    (j,) = s["joints"]
-    assert abs(j["motor_torque"]["k"] / 7.81e6 - 1) < 0.02
-    _bad(_cli("clamped", tmp_path / "log.csv", "--positions", pos, "--torques", "tau1", "--out", tmp_path / "x"),
-         "--torques", out=tmp_path / "x")
-
-
-def test_frf(files, tmp_path):
-    """A closed-loop multisine on the two-inertia model (tests/ident/frf_sim.py, independent of the estimator)."""
-    from mocapfj.ident.multisine import design_multisine
-
-    from .ident.frf_sim import simulate_multisine
-
-    fs, P = 1 / 0.003, dict(J=0.75, I=1.165, k=1150.0, d=1.0, b=0.8, v=0.3)
-    ms = design_multisine(fs, 1024, 0.5, 12.0, rms=0.01, seed=5)
-    u, y, r = simulate_multisine(P, [ms], 6, kp=300.0, kd=30.0, noise_sd=1.0, seed=6)
-    write_csv_columns(tmp_path / "log.csv", {"time": np.arange(u.shape[1]) / fs, "tau": u[0], "qm": y[0], "qref": r[0]})
-    s = json.loads(_ok(_cli("frf", tmp_path / "log.csv", "--input", "tau", "--output", "qm", "--reference", "qref",
-                            "--out", tmp_path / "o", "--json")).stdout)
-    assert s["model"]["name"] == "two_inertia" and abs(s["model"]["params"]["k"]["value"] / P["k"] - 1) < 0.03
-    _bad(_cli("frf", tmp_path / "log.csv", "--input", "torque", "--output", "qm", "--out", tmp_path / "x"), "--input",
+def test_clamped_and_frf_bad_input(files, tmp_path):
+    """Their real runs (the KR500's stiffness, a closed-loop multisine's two-inertia model): in
+    process in tests/ident/test_algebraic_cli.py and tests/ident/test_frf_cli.py."""
+    _bad(_cli("clamped", files / "stop.csv", "--positions", "delta", "--torques", "tau1", "--out", tmp_path / "x"),
+         "tau1", out=tmp_path / "x")
+    _bad(_cli("frf", files / "stop.csv", "--input", "torque", "--output", "delta", "--out", tmp_path / "x"), "torque",
          out=tmp_path / "x")
 
 
