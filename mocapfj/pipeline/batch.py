@@ -43,8 +43,6 @@ PARAMS = ("I", "mglx", "mgly", "c", "v", "J", "b", "k")   # Lightcap and Banks (
 # -- one recording, in a worker ------------------------------------------------------------------
 
 def _one_line(e: BaseException) -> str:
-    from ..errors import InputError
-
     text = str(e) if isinstance(e, InputError) else f"{type(e).__name__}: {str(e)}"
     return " ".join(text.split())[:400] or type(e).__name__
 
