@@ -322,7 +322,7 @@ def _client(scheduler: str | None, workers: int | None):
     n = workers or min(os.cpu_count() or 1, 4)
     cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, host="127.0.0.1",
                            dashboard_address=":0", silence_logs=logging.ERROR)
-    return Client(cluster), cluster, f"local cluster of {n} worker processes, 1 thread each"
+    return Client(cluster), cluster, f"local cluster of {n} worker process{'es' if n != 1 else ''}, 1 thread each"
 
 
 def run_batch(recordings: Sequence, out: str | Path, *, method: str = "output_error",
