@@ -325,6 +325,24 @@ def _client(scheduler: str | None, workers: int | None):
     return Client(cluster), cluster, f"local cluster of {n} worker process{'es' if n != 1 else ''}, 1 thread each"
 
 
+def _result(fut, tries: int = 6):
+    """A finished task's result. When the worker holding it dies before the client fetches it, Dask
+    computes the task again ("Couldn't gather keys, rescheduling"): wait for that, rather than
+    count the recording as failed. A task that raised, or that killed its workers
+    (KilledWorker), fails at once."""
+    from distributed import KilledWorker
+
+    for attempt in range(tries):
+        try:
+            return fut.result()
+        except KilledWorker:
+            raise
+        except Exception:
+            if fut.status == "error" or attempt == tries - 1:
+                raise
+            time.sleep(0.5)
+
+
 def run_batch(recordings: Sequence, out: str | Path, *, method: str = "output_error",
               stages: Sequence[str] | None = None, scheduler: str | None = None, workers: int | None = None,
               progress: Callable[[str], None] | None = None) -> BatchResult:
@@ -361,7 +379,7 @@ def run_batch(recordings: Sequence, out: str | Path, *, method: str = "output_er
         for done, fut in enumerate(as_completed(list(futures)), 1):
             k = futures[fut]
             try:
-                r = fut.result()
+                r = _result(fut)
             except Exception as e:                           # Dask gave up (e.g. KilledWorker after repeated deaths)
                 r = {"status": "failed", "stage": "dask", "error": _one_line(e), "name": None, "identify": None,
                      "files": {}, "seconds": None, "worker": None}
