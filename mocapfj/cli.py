@@ -111,9 +111,39 @@ def _cmd_demo(args) -> int:
 
 
 def _progress(args):
-    """Stage lines on stderr (not with --json, whose stdout is one JSON object; stderr still fine)."""
+    """Progress on stderr (stdout stays the summary, or with --json one JSON object): on a terminal
+    a bar over run's stages with the stage at work, each finished stage's line above it; else the
+    lines alone (logs, CI)."""
+    import re
+
+    if not sys.stderr.isatty():
+        return lambda line: print(line, file=sys.stderr, flush=True)
+    from tqdm import tqdm
+
+    bar = None
+
     def say(line: str) -> None:
-        print(line, file=sys.stderr, flush=True)
+        nonlocal bar
+        m = re.match(r"\[(\d+)/(\d+)\] (\S+)(.*)", line)
+        if m is None:
+            if bar is not None:
+                bar.write(line, file=sys.stderr)
+            else:
+                print(line, file=sys.stderr, flush=True)
+            return
+        k, n, name, rest = int(m[1]), int(m[2]), m[3], m[4]
+        if bar is None:
+            bar = tqdm(total=n, desc="mocapfj run", unit="stage", file=sys.stderr, leave=False,
+                       bar_format="{desc} {n_fmt}/{total_fmt} stages |{bar}| {elapsed}")
+        if rest == " ...":
+            bar.set_description(f"mocapfj run: {name}")
+            return
+        bar.write(line, file=sys.stderr)
+        bar.n = k
+        bar.refresh()
+        if k == n:
+            bar.close()
+            bar = None
     return say
 
 
