@@ -52,6 +52,9 @@ def _human_recording(s: dict) -> str:
     if m is not None:
         lines.append(f"  markers    {m['file']}: {m['n_markers']} markers x {m['n_frames']} frames at "
                      f"{m['rate_hz']:.6g} Hz, {m['missing_pct']:.1f} % missing")
+    elif s.get("markers_from_cameras"):
+        lines.append(f"  markers    from {s['rig_cameras']} cameras: {s['detections']} 2D detections, triangulated by "
+                     "'mocapfj run'")
     elif "controller" in s:
         lines.append("  markers    none (a controller log only: a rigid robot)")
     if c is not None:
@@ -65,7 +68,9 @@ def _human_recording(s: dict) -> str:
         parent = j["parent_markers"] if isinstance(j["parent_markers"], str) else ", ".join(j["parent_markers"])
         parts = [f"  joint {j['name']}:"]
         if j["link_markers"]:
-            parts.append(f"link markers {', '.join(j['link_markers'])} ({j['link_markers_missing_pct']:.1f} % missing), "
+            missing = ("" if j["link_markers_missing_pct"] is None
+                       else f" ({j['link_markers_missing_pct']:.1f} % missing)")
+            parts.append(f"link markers {', '.join(j['link_markers'])}{missing}, "
                          f"parent {parent}" + ("," if j["q_m_range_rad"] is not None else ""))
         if j["q_m_range_rad"] is not None:
             parts.append(f"q_m {j['q_m_range_rad'][0]:+.3f}..{j['q_m_range_rad'][1]:+.3f} rad, "

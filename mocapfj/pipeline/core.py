@@ -64,6 +64,7 @@ def summarize_recording(rec: Recording) -> dict:
         "urdf": str(rec.urdf) if rec.urdf else None,
         "rig_cameras": len(rec.rig.cameras) if rec.rig else 0,
         "detections": int(rec.detections.frame.size) if rec.detections else 0,
+        "markers_from_cameras": rec.markers_from_cameras,
         "joints": joints,
     }
 

@@ -126,3 +126,13 @@ def test_run_bad_input_exits_2(camera_bundle, tmp_path, capsys, args, needle):
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and needle in err
     assert not (tmp_path / "o" / "run.json").exists()
+
+
+def test_inspect_says_the_markers_come_from_the_cameras(camera_bundle, capsys):
+    bundle, _, _ = camera_bundle
+    assert main(["inspect", str(bundle)]) == 0
+    out = capsys.readouterr().out
+    assert "markers    from 8 cameras:" in out and "2D detections, triangulated by 'mocapfj run'" in out
+    assert main(["inspect", str(bundle), "--json"]) == 0
+    s = json.loads(capsys.readouterr().out)
+    assert s["markers"] is None and s["markers_from_cameras"] is True and s["rig_cameras"] == 8
