@@ -325,22 +325,22 @@ def _client(scheduler: str | None, workers: int | None):
     return Client(cluster), cluster, f"local cluster of {n} worker process{'es' if n != 1 else ''}, 1 thread each"
 
 
-def _result(fut, tries: int = 6):
-    """A finished task's result. When the worker holding it dies before the client fetches it, Dask
-    computes the task again ("Couldn't gather keys, rescheduling"): wait for that, rather than
-    count the recording as failed. A task that raised, or that killed its workers
-    (KilledWorker), fails at once."""
+def _result(fut, resubmit, tries: int = 3):
+    """A finished task's result. When the worker holding it dies before the client fetches it,
+    Dask's own rescheduling can leave this future lost or cancelled ("Couldn't gather keys"): the
+    task is then submitted again (a task is a pure function of its recording), up to `tries`
+    times. A task that raised, or that killed its workers (KilledWorker), fails at once."""
     from distributed import KilledWorker
 
-    for attempt in range(tries):
+    for attempt in range(tries + 1):
         try:
             return fut.result()
         except KilledWorker:
             raise
         except Exception:
-            if fut.status == "error" or attempt == tries - 1:
+            if fut.status == "error" or attempt == tries:
                 raise
-            time.sleep(0.5)
+            fut = resubmit(attempt + 1)
 
 
 def run_batch(recordings: Sequence, out: str | Path, *, method: str = "output_error",
@@ -373,13 +373,16 @@ def run_batch(recordings: Sequence, out: str | Path, *, method: str = "output_er
     client, cluster, where = _client(scheduler, workers)
     results: dict[int, dict] = {}
     try:
-        futures = {client.submit(_remote, p, method, stages, key=f"mocapfj-batch-{k:04d}-{names[k]}", pure=False): k
-                   for k, p in enumerate(paths)}
+        def submit(k, retry=0):
+            key = f"mocapfj-batch-{k:04d}-{names[k]}" + (f"-retry{retry}" if retry else "")
+            return client.submit(_remote, paths[k], method, stages, key=key, pure=False)
+
+        futures = {submit(k): k for k in range(len(paths))}
         say(f"{len(paths)} recording(s) on a {where}")
         for done, fut in enumerate(as_completed(list(futures)), 1):
             k = futures[fut]
             try:
-                r = _result(fut)
+                r = _result(fut, lambda retry, k=k: submit(k, retry))
             except Exception as e:                           # Dask gave up (e.g. KilledWorker after repeated deaths)
                 r = {"status": "failed", "stage": "dask", "error": _one_line(e), "name": None, "identify": None,
                      "files": {}, "seconds": None, "worker": None}

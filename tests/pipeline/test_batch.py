@@ -175,7 +175,7 @@ def test_a_worker_killed_mid_batch_is_replaced_and_the_batch_completes(cluster, 
     assert killed["pid"] not in after.values()                               # a new process took its place
     with pytest.raises(ProcessLookupError):
         os.kill(killed["pid"], 0)
-    assert [t.status for t in r.trials] == ["done"] * 5
+    assert [t.status for t in r.trials] == ["done"] * 5, [(t.name, t.stage, t.error) for t in r.trials]
     interrupted = [n for n in names if any(n in k for k in killed["keys"])]
     rerun = [t for t in r.trials if t.name in interrupted and t.worker.split(":")[1] != str(killed["pid"])]
     assert rerun, (interrupted, [t.worker for t in r.trials])                # at least the task it was running
