@@ -386,6 +386,7 @@ def run_batch(recordings: Sequence, out: str | Path, *, method: str = "output_er
             except Exception as e:                           # Dask gave up (e.g. KilledWorker after repeated deaths)
                 r = {"status": "failed", "stage": "dask", "error": _one_line(e), "name": None, "identify": None,
                      "files": {}, "seconds": None, "worker": None}
+            fut.release()                                    # fetched: the worker may drop the files' bytes
             for rel, data in r.pop("files").items():
                 write_bytes_atomic(out / names[k] / rel, data)
             results[k] = r
