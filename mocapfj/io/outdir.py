@@ -17,7 +17,7 @@ from pathlib import Path
 
 from ..errors import InputError
 
-__all__ = ["check_output_dir", "staged_output", "MARKER"]
+__all__ = ["check_output_dir", "staged_output", "replace_dir", "MARKER"]
 
 MARKER = ".mocapfj-output"
 _STAGE = ".mocapfj-tmp"
@@ -55,6 +55,18 @@ def check_output_dir(out, inputs: Sequence, option: str = "--out") -> Path:
     return out_r
 
 
+def replace_dir(staging: Path, final: Path, old: Path) -> None:
+    """Put the finished directory `staging` in place of `final`: the previous one is moved aside to
+    `old` and removed only once the new one is there."""
+    moved = False
+    if final.exists():
+        os.replace(final, old)
+        moved = True
+    os.replace(staging, final)
+    if moved:
+        shutil.rmtree(old, ignore_errors=True)
+
+
 def _alive(pid: int) -> bool:
     try:
         os.kill(pid, 0)
@@ -89,13 +101,7 @@ def staged_output(out) -> Iterator[Path]:
         yield stage
         (stage / MARKER).write_text("written by mocapfj; a later run into this directory replaces it\n",
                                     encoding="utf-8")
-        old = None
-        if out.exists():
-            old = out.parent / f".{out.name}.{os.getpid()}.old{_STAGE}"
-            os.replace(out, old)
-        os.replace(stage, out)
-        if old is not None:
-            shutil.rmtree(old, ignore_errors=True)
+        replace_dir(stage, out, out.parent / f".{out.name}.{os.getpid()}.old{_STAGE}")
     except BaseException:
         shutil.rmtree(stage, ignore_errors=True)
         raise

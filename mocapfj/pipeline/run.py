@@ -110,18 +110,6 @@ def bundle_digest(rec) -> str:
     return _sha([(n, _file_sha(root / n)) for n in files])
 
 
-def _replace_dir(staging: Path, final: Path) -> None:
-    """Move a finished stage directory into place (the old one removed only once the new exists)."""
-    old = final.with_name(f".{final.name}.old")
-    if old.exists():
-        shutil.rmtree(old)
-    if final.exists():
-        os.replace(final, old)
-    os.replace(staging, final)
-    if old.exists():
-        shutil.rmtree(old)
-
-
 class _Context:
     """The in-memory results stages share: the recordings and the joints stage's calibrations,
     computed when a stage first needs them (a skipped stage's results are recomputed only when a
@@ -294,7 +282,7 @@ def run_pipeline(recording, out: str | Path, validation=None, stages: Sequence[s
     run stops there: the finished stages' directories stay, and ``run.json`` says which failed.
     `method`: the identify stage's method (:func:`mocapfj.identify`; default its own).
     """
-    from ..io.outdir import MARKER
+    from ..io.outdir import MARKER, replace_dir
 
     out = Path(out)
     wanted = tuple(STAGES if stages is None else stages)
@@ -343,7 +331,7 @@ def run_pipeline(recording, out: str | Path, validation=None, stages: Sequence[s
             if name in _OWN_DIR:
                 staging.mkdir()
                 summary, files = _RUNNERS[name](ctx, staging)
-                _replace_dir(staging, d)
+                replace_dir(staging, d, out / f".{name}.old.{os.getpid()}")
             else:
                 summary, files = _RUNNERS[name](ctx, d)
         except (InputError, OSError, ValueError, RuntimeError, ArithmeticError, LookupError, TypeError) as e:

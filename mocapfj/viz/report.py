@@ -18,6 +18,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from ..errors import InputError
+from ..io.outdir import replace_dir
 from .document import Note, Paragraph, Section, Table, render_html, render_markdown
 from .report_format import fmt, read_result_json
 
@@ -167,14 +168,7 @@ def _write_figures(run_dir: Path, figures) -> None:
         for f in figures:
             (stage / f.name).write_bytes(f.png)
         os.chmod(stage, 0o755)
-        final = run_dir / FIGURES_DIR
-        old = None
-        if final.exists():
-            old = run_dir / f".{FIGURES_DIR}.old.{os.getpid()}"
-            os.replace(final, old)
-        os.replace(stage, final)
-        if old is not None:
-            shutil.rmtree(old, ignore_errors=True)
+        replace_dir(stage, run_dir / FIGURES_DIR, run_dir / f".{FIGURES_DIR}.old.{os.getpid()}")
     except BaseException:
         shutil.rmtree(stage, ignore_errors=True)
         raise
