@@ -145,7 +145,10 @@ def test_ctrl_c_and_sigterm_print_one_line_and_leave_nothing(bundle, tmp_path, s
     import time
 
     out = tmp_path / "o"
-    p = subprocess.Popen([sys.executable, "-m", "mocapfj.cli", "identify", str(bundle), "--out", str(out)],
+    # two_step: seconds of work after the staging directory appears (the default output error refuses a
+    # 3 s trial at once, which under load could end the run before the signal lands)
+    p = subprocess.Popen([sys.executable, "-m", "mocapfj.cli", "identify", str(bundle), "--out", str(out),
+                          "--method", "two_step"],
                          stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     deadline = time.monotonic() + 60
     while not list(tmp_path.glob(".o.*.mocapfj-tmp")) and p.poll() is None and time.monotonic() < deadline:
