@@ -97,3 +97,34 @@ def test_locate_finds_a_delay_at_its_lag():
     assert xc["lag_ms"] == pytest.approx(12.0) and xc["peak_correlation"] > 0.99 and xc["p_value"] < 1e-10
     assert len(xc["lags_ms"]) == len(xc["correlation"]) == 25
     assert {"rms_Nm", "whiteness_p_value", "worst_windows", "regions", "periodicity", "bands_power_fraction"} <= set(loc)
+
+
+def test_compiled_link_with_a_position_torque_or_coupling_agrees_with_the_integrator(monkeypatch):
+    """A position torque P(q) and a coupling torque run through the compiled kernel's torque input
+    (P by fixed point along the simulated angle); the general integrator at a tight tolerance is
+    the reference. Both paths agree to the kernel's own accuracy on the plain joint (1e-6 rad)."""
+    import mocapfj.discover.model as M
+
+    (m,) = read_model_file(ROOT / "datasets" / "pa10_joint2.toml").values()
+    m = m.with_(friction=m.friction.with_smoothing(0.05))      # one (tanh) friction law for both paths
+    fs = 250.0
+    t = np.arange(0.0, 12.0, 1.0 / fs)
+    q_m = 0.3 + 0.3 * np.sin(2 * np.pi * 0.1 * t) + 0.05 * np.sin(2 * np.pi * 0.4 * t + 0.7)
+    q = q_m - 1e-3
+    ext = -2.5 * np.gradient(np.gradient(np.sin(3 * t), t), t)
+    cases = (("position torque", m.with_(position_torque=PositionTorque(chebyshev_Nm=(-20.0, 15.0, 10.0, 5.0),
+                                                                          center_rad=0.3, half_range_rad=0.45)), None),
+             ("coupling", m.with_(coupling={"j1": 2.5}), ext))
+    for name, mm, e in cases:
+        assert M._plain_link(mm, t, q_m, 0.02, e) is not None, name
+        fast = M.predict(mm, t, q, q_m, e)
+        monkeypatch.setattr(M, "_plain_link", lambda *a, **k: None)     # predict's general path
+        general = M.predict(mm, t, q, q_m, e, rtol=1e-6, atol=1e-9)
+        monkeypatch.undo()
+        sl = slice(int(fs), None)                       # past the start's transient
+        dq = np.abs(fast[0] - general[0])[sl].max()
+        du = np.abs(fast[1] - general[1])[sl].max()
+        assert dq < 3e-6 and du < 0.05, (name, dq, du)  # deflection 1-3 mrad, torque tens of N m
+        # and the term acts: without it the link moves by far more than that
+        bare = M.predict(m, t, q, q_m)
+        assert np.abs(bare[0] - fast[0])[sl].max() > 100 * dq, name
