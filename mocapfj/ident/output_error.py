@@ -107,6 +107,57 @@ LINK_BAND_FRACTION = 0.6
 """The comparison band's upper limit as a fraction of the link's resonance sqrt(k / I) / 2 pi."""
 
 _DEBUG = bool(os.environ.get("MOCAPFJ_OE_DEBUG"))
+
+
+class _FitMemo:
+    """A few recent linear-spring fits of identify_output_error by their inputs' content (thread-safe)."""
+
+    def __init__(self, size: int = 4):
+        import collections
+        import threading
+
+        self._d, self._size, self._lock = collections.OrderedDict(), size, threading.Lock()
+
+    def get(self, key):
+        with self._lock:
+            if key in self._d:
+                self._d.move_to_end(key)
+                return self._d[key]
+        return None
+
+    def put(self, key, value) -> None:
+        with self._lock:
+            self._d[key] = value
+            while len(self._d) > self._size:
+                self._d.popitem(last=False)
+
+
+_LINEAR_FITS = _FitMemo()
+
+
+def _linear_fit_key(*parts) -> bytes:
+    """A digest of arrays, tuples and numbers (the arguments steps 1-4 depend on)."""
+    import hashlib
+
+    h = hashlib.blake2b(digest_size=20)
+
+    def feed(v):
+        if v is None:
+            h.update(b"N")
+        elif isinstance(v, (tuple, list)):
+            h.update(b"(%d" % len(v))
+            for e in v:
+                feed(e)
+        elif isinstance(v, np.ndarray) or np.ndim(v) > 0:
+            a = np.ascontiguousarray(v)
+            h.update(str((a.dtype.str, a.shape)).encode())
+            h.update(a.tobytes())
+        else:
+            h.update(repr(float(v) if isinstance(v, (int, float, np.number)) and not isinstance(v, bool) else v).encode())
+
+    for v in parts:
+        feed(v)
+    return h.digest()
 # A trial whose link resonance needs more than SUBSTEP_GROWTH x the substeps per sample of the
 # problem's first simulation (and more than MIN_SUBSTEP_CAP) counts as diverged: 16 x the
 # resonance is 256 x the stiffness-to-inertia ratio, far outside what the data can support.
@@ -921,59 +972,81 @@ def identify_output_error(t, q, q_m, u, *, fs_hz: float, measured=None, controll
                   f"cost {cost:.1f} n {n} {time.perf_counter() - tic:.2f}s", " ".join(f"{v:.4g}" for v in xs))
         return prob, xs, cost
 
-    # 1. the split of the total inertia I + J: the cost in the excitation's band can have a second
-    #    minimum at a light, stiff link; short fits from several splits, the best kept
-    b0 = min(band0, f_max) if band_hz is None else float(band_hz)
-    prob0, _, _ = fit(b0, "sign", x, None, 1, search=True)
-    noise0 = ((prob0.a_q, prob0.s_q), (prob0.a_u, prob0.s_u))
-    x = _search_split(x, lambda xs: fit(b0, "sign", xs, noise0, 8, search=True)[1:])[1]
-    # 2. the Coulomb law in that band: sign with sticking, or tanh with eps fitted from the best
-    #    of a few starting values
-    prob_s, x_s, cost_s = fit(b0, "sign", x, None, 25, search=True)
-    noise0 = ((prob_s.a_q, prob_s.s_q), (prob_s.a_u, prob_s.s_u))
-    tanh_fits = []
-    for e in friction_scales:
-        xe = x_s.copy()
-        xe[_IDX["eps"]] = float(np.clip(e * v_rms, *EPS_RANGE_RAD_S))
-        tanh_fits.append(fit(b0, "tanh", xe, noise0, 6, search=True))
-    prob_t, x_t, cost_t = fit(b0, "tanh", min(tanh_fits, key=lambda f: f[2])[1], noise0, 25, search=True)
-    scores = {0.0: cost_s, float(x_t[_IDX["eps"]]): cost_t}
-    law, x = ("tanh", x_t) if cost_t < cost_s - 2.0 else ("sign", x_s)
-    # 3. the band widened with it, in steps of 3, up to a fraction of the link's resonance (above
-    #    it the torque rings after every stick and slip of the friction, whose fine shape the model
-    #    cannot be trusted with), the motor angle's noise limit and 60 Hz
-    band = b0
-    if band_hz is None:
-        for _ in range(4):
-            f_link = math.sqrt(x[_IDX["k"]] / x[_IDX["I"]]) / (2 * math.pi)
-            target = max(b0, min(f_max, link_band_fraction * f_link))
-            if target <= band * 1.05:
-                break
-            band = min(target, 3.0 * band)
-            prob_b, x, cost_b = fit(band, law, x, None, 25, search=True)
-        # the split again in the final band: in the excitation's band the cost is nearly flat along
-        # I + J = const, and in the wider one it is rugged (each stick and slip of the friction), so
-        # a local fit from the first band's split can stop far from the best
-        if band > 1.05 * b0:
-            noise_b = ((prob_b.a_q, prob_b.s_q), (prob_b.a_u, prob_b.s_u))
-            x = _search_split(x, lambda xs: fit(band, law, xs, noise_b, 8, search=True)[1:], (cost_b, x))[1]
-    # 4. the final fit, whitened by the noise models of the last residuals; then a look at the
-    #    inertia split from either side (the cost can have a second minimum there)
-    prob, x, cost = fit(band, law, x, "white")
-    noise = (prob.a_q, prob.s_q), (prob.a_u, prob.s_u)
-    A = x[_IDX["I"]] + x[_IDX["J"]]
-    found = [(cost, x, prob)]
-    for frac in (0.6, 1.5):
-        xs = x.copy()
-        xs[_IDX["I"]] = min(frac * x[_IDX["I"]], 0.97 * A)
-        xs[_IDX["J"]] = A - xs[_IDX["I"]]
-        _, xs, c = fit(band, law, xs, noise, 10)
-        if c < cost + AMBIGUITY_CHI2:
-            p2, xs, c = fit(band, law, xs, noise, 25)
-            found.append((c, xs, p2))
-    cost, x, prob = min(found, key=lambda f: f[0])
-    others = [(c - cost, xs) for c, xs, _ in found
-              if c - cost < AMBIGUITY_CHI2 and np.abs(xs[_IDX["I"]] - x[_IDX["I"]]) > 1e-6 * A]
+    x_init = x
+
+    def _linear_fit():
+        nonlocal nfev
+        x = x_init
+        # 1. the split of the total inertia I + J: the cost in the excitation's band can have a second
+        #    minimum at a light, stiff link; short fits from several splits, the best kept
+        b0 = min(band0, f_max) if band_hz is None else float(band_hz)
+        prob0, _, _ = fit(b0, "sign", x, None, 1, search=True)
+        noise0 = ((prob0.a_q, prob0.s_q), (prob0.a_u, prob0.s_u))
+        x = _search_split(x, lambda xs: fit(b0, "sign", xs, noise0, 8, search=True)[1:])[1]
+        # 2. the Coulomb law in that band: sign with sticking, or tanh with eps fitted from the best
+        #    of a few starting values
+        prob_s, x_s, cost_s = fit(b0, "sign", x, None, 25, search=True)
+        noise0 = ((prob_s.a_q, prob_s.s_q), (prob_s.a_u, prob_s.s_u))
+        tanh_fits = []
+        for e in friction_scales:
+            xe = x_s.copy()
+            xe[_IDX["eps"]] = float(np.clip(e * v_rms, *EPS_RANGE_RAD_S))
+            tanh_fits.append(fit(b0, "tanh", xe, noise0, 6, search=True))
+        prob_t, x_t, cost_t = fit(b0, "tanh", min(tanh_fits, key=lambda f: f[2])[1], noise0, 25, search=True)
+        scores = {0.0: cost_s, float(x_t[_IDX["eps"]]): cost_t}
+        law, x = ("tanh", x_t) if cost_t < cost_s - 2.0 else ("sign", x_s)
+        # 3. the band widened with it, in steps of 3, up to a fraction of the link's resonance (above
+        #    it the torque rings after every stick and slip of the friction, whose fine shape the model
+        #    cannot be trusted with), the motor angle's noise limit and 60 Hz
+        band = b0
+        if band_hz is None:
+            for _ in range(4):
+                f_link = math.sqrt(x[_IDX["k"]] / x[_IDX["I"]]) / (2 * math.pi)
+                target = max(b0, min(f_max, link_band_fraction * f_link))
+                if target <= band * 1.05:
+                    break
+                band = min(target, 3.0 * band)
+                prob_b, x, cost_b = fit(band, law, x, None, 25, search=True)
+            # the split again in the final band: in the excitation's band the cost is nearly flat along
+            # I + J = const, and in the wider one it is rugged (each stick and slip of the friction), so
+            # a local fit from the first band's split can stop far from the best
+            if band > 1.05 * b0:
+                noise_b = ((prob_b.a_q, prob_b.s_q), (prob_b.a_u, prob_b.s_u))
+                x = _search_split(x, lambda xs: fit(band, law, xs, noise_b, 8, search=True)[1:], (cost_b, x))[1]
+        # 4. the final fit, whitened by the noise models of the last residuals; then a look at the
+        #    inertia split from either side (the cost can have a second minimum there)
+        prob, x, cost = fit(band, law, x, "white")
+        noise = (prob.a_q, prob.s_q), (prob.a_u, prob.s_u)
+        A = x[_IDX["I"]] + x[_IDX["J"]]
+        found = [(cost, x, prob)]
+        for frac in (0.6, 1.5):
+            xs = x.copy()
+            xs[_IDX["I"]] = min(frac * x[_IDX["I"]], 0.97 * A)
+            xs[_IDX["J"]] = A - xs[_IDX["I"]]
+            _, xs, c = fit(band, law, xs, noise, 10)
+            if c < cost + AMBIGUITY_CHI2:
+                p2, xs, c = fit(band, law, xs, noise, 25)
+                found.append((c, xs, p2))
+        cost, x, prob = min(found, key=lambda f: f[0])
+        others = [(c - cost, xs) for c, xs, _ in found
+                  if c - cost < AMBIGUITY_CHI2 and np.abs(xs[_IDX["I"]] - x[_IDX["I"]]) > 1e-6 * A]
+        return law, x, band, scores, noise, cost, others, prob
+
+    # steps 1-4, the linear-spring fit, depend only on the signals and these settings: a second
+    # identification of the same signals (discovery's effect-free re-identification after the
+    # one with every spring model) takes them from the first (_LINEAR_FITS), not again
+    key = _linear_fit_key(t, q, q_m, u, measured, controller, band_hz, trim_s, friction_scales, x0, max_nfev,
+                          link_band_fraction, clock_offset_s)
+    hit = _LINEAR_FITS.get(key)
+    if hit is not None:
+        law, x, band, scores, noise, cost, others, nfev = hit
+        x, scores, others = x.copy(), dict(scores), [(c, xs.copy()) for c, xs in others]
+        prob = _Problem(data_at(band), law, scale, noise, dt=clock_offset_s)
+    else:
+        law, x, band, scores, noise, cost, others, prob = _linear_fit()
+        _LINEAR_FITS.put(key, (law, x.copy(), band, dict(scores), noise, cost,
+                               [(c, xs.copy()) for c, xs in others], nfev))
+
     # 5b. a stiffening (or softening) spring: k delta + k3 delta^3, kept when the data want it by far
     #    (a likelihood ratio of CUBIC_CHI2) and it changes the stiffness by CUBIC_MIN_PCT over the
     #    deflections the recording reaches

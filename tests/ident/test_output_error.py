@@ -50,13 +50,21 @@ def test_first_row_through_the_whole_chain(tmp_path):
 
 
 @pytest.fixture(scope="module")
-def families():
-    """A cobot, a heavy joint and a vertical joint of the grid's rules, 25-30 s, from plain arrays
-    through the joints stage (mocapfj.signals)."""
+def family_signals():
+    """A cobot, a heavy joint and a vertical joint of the grid's rules, 25-30 s, as plain arrays
+    through the joints stage (mocapfj.signals): {family: (case, JointSignals)}."""
     out = {}
     for case in small_grid(3)[1:4]:
         rec, truth = simulate_hinge(case)
-        s = mocapfj.signals(rec)["j1"]
+        out[case.family] = (case, mocapfj.signals(rec)["j1"])
+    return out
+
+
+@pytest.fixture(scope="module")
+def families(family_signals):
+    """Those joints identified by output error."""
+    out = {}
+    for case, s in family_signals.values():
         out[case.family] = (case, mocapfj.identify_joint(s.t, s.q, s.q_m, s.u, fs_hz=s.fs_hz, method="output_error",
                                                          measured=s.measured,
                                                          controller=(s.t_c, s.q_m_c, s.u_c, s.fs_c_hz)))
@@ -171,3 +179,29 @@ def test_motor_angle_noise_that_sets_the_inertia_split_is_reported():
     oe = identify_output_error(s.t, s.q, s.q_m, s.u, fs_hz=s.fs_hz, measured=s.measured,
                                controller=(s.t_c, s.q_m_c, s.u_c, s.fs_c_hz))
     assert oe.split_noise_chi2 < 25.0, oe.split_noise_chi2
+
+
+def test_a_second_identification_of_the_same_signals_reuses_the_linear_fit(family_signals, monkeypatch):
+    """The linear-spring fit (steps 1-4) of a recording identified with every spring model is
+    reused by its effect-free identification (discovery runs both): the result is the one a fresh
+    identification gives, to the bit, and the memo was used."""
+    import mocapfj.ident.output_error as oe_mod
+
+    _, s = family_signals["cobot"]
+    kw = dict(fs_hz=s.fs_hz, measured=s.measured, controller=(s.t_c, s.q_m_c, s.u_c, s.fs_c_hz))
+    oe_mod._LINEAR_FITS._d.clear()
+    fresh = oe_mod.identify_output_error(s.t, s.q, s.q_m, s.u, test_cubic=False, test_hysteresis=False, **kw)
+    oe_mod._LINEAR_FITS._d.clear()
+    oe_mod.identify_output_error(s.t, s.q, s.q_m, s.u, **kw)                   # every spring model
+    hits = []
+    get = oe_mod._LINEAR_FITS.get
+    monkeypatch.setattr(oe_mod._LINEAR_FITS, "get", lambda key: hits.append(get(key) is not None) or get(key))
+    again = oe_mod.identify_output_error(s.t, s.q, s.q_m, s.u, test_cubic=False, test_hysteresis=False, **kw)
+    assert hits == [True]
+    for a, b in ((fresh.fit.values, again.fit.values), (fresh.fit.std, again.fit.std), (fresh.fit.cov, again.fit.cov)):
+        np.testing.assert_array_equal(a, b)
+    assert (fresh.n_iter, fresh.band_hz, fresh.friction_scale) == (again.n_iter, again.band_hz, again.friction_scale)
+    # other signals are not served from it
+    hits.clear()
+    oe_mod.identify_output_error(s.t, s.q, s.q_m, s.u * 1.01, test_cubic=False, test_hysteresis=False, **kw)
+    assert hits == [False]
