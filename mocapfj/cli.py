@@ -573,7 +573,8 @@ def _cmd_frf(args) -> int:
                 time=args.time, period_s=args.period,
                 model=args.model or ("rational" if args.single_record else "two_inertia"), transient=args.transient,
                 realisations=args.realisations, estimator=args.estimator, single_record=args.single_record,
-                order=args.order, steady_period=args.steady_period, compare=args.compare, joint=args.joint)
+                order=args.order, steady_period=args.steady_period, compare=args.compare, joint=args.joint,
+                gravity_stiffness=args.gravity_stiffness)
 
     def human(s):
         f = s["frf"]
@@ -594,6 +595,10 @@ def _cmd_frf(args) -> int:
                                                                    if parts else "no unexcited line in the band"))
         if s["model"]:
             m = s["model"]
+            g = s.get("gravity") or {}
+            if g.get("g_Nm_per_rad"):
+                lines.append(f"  gravity stiffness held: {g['g_Nm_per_rad']:.4g} +- {g.get('g_std_Nm_per_rad', 0):.2g} N m/rad ({g.get('share_of_k_pct', 0):+.2f} % "
+                             f"of k), {g['source']}")
             lines.append(f"  {m['name']}: " + ", ".join(f"{n} {p['value']:.4g} +- {p['std']:.2g}" for n, p in m["params"].items())
                          + f" (chi2/dof {m['chi2_red']:.2f})")
             for md in s["modes"]:
@@ -881,6 +886,10 @@ def build_parser() -> argparse.ArgumentParser:
                     help="the time-domain identification of the same joint (identify.json, its directory or a run "
                          "directory): the two-inertia parameters and modes held against it, disagreements named")
     fr.add_argument("--joint", default=None, help="with --compare: the joint of the identification (default its only one)")
+    fr.add_argument("--gravity-stiffness", type=float, default=None, metavar="G",
+                    help="the link's gravity stiffness G'(q0) at the operating point, N m/rad (negative when gravity "
+                         "pulls the link away from it), held in the two-inertia fit; default from --compare's mglx, "
+                         "mgly at the record's mean angle, else 0")
     fr.add_argument("--out", required=True, help="output directory")
     fr.add_argument("--json", action="store_true", help="print a JSON summary on stdout")
     fr.set_defaults(func=_cmd_frf)

@@ -15,6 +15,19 @@ gives, with Z(s) = d s + k and D(s) = J I s^3 + (J (v + d) + (b + d) I) s^2 + (J
 The anti-resonance is the link swinging on the spring with the motor held, omega_a^2 = k / I; the
 resonance the two inertias against each other, omega_r^2 ~ k (1/I + 1/J).
 
+Gravity, when the rigid part is known (Makarov et al.'s physically parametrised model): a link
+under gravity G(q) (I q'' + v q' + G(q) = spring torque) oscillates about its operating point q0
+with the extra stiffness g = G'(q0), known from the rigid model (for a single joint G(q) =
+-mglx sin q + mgly cos q, so g = -mglx cos q0 - mgly sin q0; negative when gravity pulls the link
+away from q0). The link equation gains g q, the anti-resonance becomes omega_a^2 = (k + g) / I and the
+denominator s D(s) becomes the quartic
+
+    J I s^4 + (J (v + d) + (b + d) I) s^3 + (J (k + g) + I k + b (v + d) + d v) s^2 + (k (b + v) + g (b + d)) s + k g
+
+(q_m / u has numerator I s^2 + (v + d) s + k + g). The linear fit without it reads g into k and I:
+on PA-10 joint 2 at q0 = 0.3 rad (g = -104 N m/rad, 0.9 % of k) k came out +0.84 % and I +1.8 %
+(benchmarks/bench_frf_crosscheck.py). g is given, never fitted: fitted it trades off against k.
+
 Fit: weighted nonlinear least squares on the complex FRF (the maximum-likelihood criterion of a
 FRF with circular complex Gaussian errors, Pintelon and Schoukens 2012, §7): minimise
 sum_k |G_hat_k - G(j w_k, theta)|^2 / var_k with var_k the FRF's noise variance, theta = (ln J, ln I, ln k, d, b, v),
@@ -74,6 +87,8 @@ class FRFFit:
     chi2, dof : weighted residual sum of squares and its degrees of freedom (2 K - free parameters)
     G_fit : (K,) complex, the model at the FRF's frequencies
     output : "motor" or "link"
+    gravity_stiffness, gravity_stiffness_std : the link's gravity stiffness held in the fit and its
+        SD (counted in the parameters' SDs), N m/rad
     """
 
     params: dict
@@ -84,6 +99,8 @@ class FRFFit:
     G_fit: np.ndarray
     output: str
     model: str = "two_inertia"
+    gravity_stiffness: float = 0.0
+    gravity_stiffness_std: float = 0.0
 
     @property
     def chi2_red(self) -> float:
@@ -93,29 +110,38 @@ class FRFFit:
         return self.params[name].value
 
     def to_dict(self) -> dict:
-        return {"name": self.model, "output": self.output,
+        return {"name": self.model, "output": self.output, "gravity_stiffness": self.gravity_stiffness,
+                "gravity_stiffness_std": self.gravity_stiffness_std,
                 "params": {n: {"value": p.value, "std": p.std, "rel_std_pct": p.rel_std_pct}
                            for n, p in self.params.items()},
                 "chi2": self.chi2, "dof": self.dof, "chi2_red": self.chi2_red,
                 "modes": [m.to_dict() for m in self.modes]}
 
 
-def _polys(J, I, k, d, b, v):
-    """Numerator coefficients (motor, link) and D(s) (highest power first)."""
-    D = np.array([J * I, J * (v + d) + (b + d) * I, J * k + I * k + b * (v + d) + d * v, k * (b + v)])
-    return np.array([I, v + d, k]), np.array([d, k]), D
+def _polys(J, I, k, d, b, v, g=0.0):
+    """Numerator coefficients (motor, link) and the denominator (highest power first): D(s), whose
+    s factor the callers add, without gravity; the whole quartic with it (g != 0)."""
+    if g == 0.0:
+        D = np.array([J * I, J * (v + d) + (b + d) * I, J * k + I * k + b * (v + d) + d * v, k * (b + v)])
+        return np.array([I, v + d, k]), np.array([d, k]), D
+    D = np.array([J * I, J * (v + d) + (b + d) * I, J * (k + g) + I * k + b * (v + d) + d * v,
+                  k * (b + v) + g * (b + d), k * g])
+    return np.array([I, v + d, k + g]), np.array([d, k]), D
 
 
-def two_inertia_frf(f_hz, J, I, k, d=0.0, b=0.0, v=0.0, *, output: str = "motor") -> np.ndarray:
-    """G(j 2 pi f) of the two-inertia joint, (K,) complex, rad / (N m), for f_hz (K,) > 0."""
+def two_inertia_frf(f_hz, J, I, k, d=0.0, b=0.0, v=0.0, *, output: str = "motor", g: float = 0.0) -> np.ndarray:
+    """G(j 2 pi f) of the two-inertia joint, (K,) complex, rad / (N m), for f_hz (K,) > 0; g N m/rad
+    the link's known gravity stiffness at the operating point (module docstring)."""
     s = 2j * np.pi * np.asarray(f_hz, dtype=np.float64)
-    nm, nl, D = _polys(J, I, k, d, b, v)
-    return np.polyval(nm if output == "motor" else nl, s) / (s * np.polyval(D, s))
+    nm, nl, D = _polys(J, I, k, d, b, v, g)
+    den = s * np.polyval(D, s) if g == 0.0 else np.polyval(D, s)
+    return np.polyval(nm if output == "motor" else nl, s) / den
 
 
-def two_inertia_modes(J, I, k, d=0.0, b=0.0, v=0.0, *, output: str = "motor") -> list[tuple[str, float, float]]:
+def two_inertia_modes(J, I, k, d=0.0, b=0.0, v=0.0, *, output: str = "motor",
+                      g: float = 0.0) -> list[tuple[str, float, float]]:
     """[(kind, f_hz, zeta)]: the anti-resonance (motor output, when its zeros are complex) and the resonance."""
-    nm, _, D = _polys(J, I, k, d, b, v)
+    nm, _, D = _polys(J, I, k, d, b, v, g)
     out = []
     if output == "motor":
         out += [("antiresonance", *_fz(r)) for r in np.roots(nm) if r.imag > 0]
@@ -173,7 +199,8 @@ def _initial(frf: FRF, output: str):
     return starts
 
 
-def fit_two_inertia(frf: FRF, *, output: str = "motor", fixed: dict | None = None, f_band_hz=None) -> FRFFit:
+def fit_two_inertia(frf: FRF, *, output: str = "motor", fixed: dict | None = None, f_band_hz=None,
+                    gravity_stiffness: float = 0.0, gravity_stiffness_std: float = 0.0) -> FRFFit:
     """Fit (J, I, k, d, b, v) of the two-inertia joint to `frf` by weighted nonlinear least squares.
 
     Parameters
@@ -187,12 +214,38 @@ def fit_two_inertia(frf: FRF, *, output: str = "motor", fixed: dict | None = Non
         Parameters held at known values (e.g. the rigid part known: ``{"J": ...}``).
     f_band_hz : (lo, hi) or None
         Fit only the lines inside this band.
+    gravity_stiffness : float
+        g = G'(q0), N m/rad, the link's gravity stiffness at the operating point, from the rigid
+        model (module docstring); 0 for a joint gravity does not act on (or a horizontal one).
+    gravity_stiffness_std : float
+        Its SD: the fit is repeated at g +- SD and half the change of every parameter and mode is
+        added (in quadrature) to its SD (k takes up nearly all of it: dk/dg is about -1).
     """
     if not isinstance(frf, FRF):
         raise InputError(None, "frf", "an FRF (mocapfj.ident.frf.estimate_frf)", type(frf).__name__)
     if output not in _OUTPUTS:
         raise InputError(None, "output", "motor or link", output)
     fixed = dict(fixed or {})
+    g, g_sd = float(gravity_stiffness), float(gravity_stiffness_std)
+    if not np.isfinite(g):
+        raise InputError(None, "gravity_stiffness", "a finite gravity stiffness in N m/rad", gravity_stiffness)
+    if not (np.isfinite(g_sd) and g_sd >= 0):
+        raise InputError(None, "gravity_stiffness_std", "a finite SD >= 0 in N m/rad", gravity_stiffness_std)
+    if g_sd > 0:
+        fit = fit_two_inertia(frf, output=output, fixed=fixed, f_band_hz=f_band_hz, gravity_stiffness=g)
+        hi, lo = (fit_two_inertia(frf, output=output, fixed=fixed, f_band_hz=f_band_hz, gravity_stiffness=g + s * g_sd)
+                  for s in (1.0, -1.0))
+        dv = np.array([(hi.value(n_) - lo.value(n_)) / 2.0 for n_ in TWO_INERTIA_PARAMS])
+        cov = fit.cov + np.outer(dv, dv)
+        params = {n_: Parameter(n_, fit.value(n_), float(np.sqrt(max(cov[i, i], 0.0))))
+                  for i, n_ in enumerate(TWO_INERTIA_PARAMS)}
+        modes = fit.modes
+        if [m.kind for m in hi.modes] == [m.kind for m in fit.modes] == [m.kind for m in lo.modes]:
+            modes = tuple(Mode(m.kind, m.f_hz, m.zeta, float(np.hypot(m.f_hz_std, (h.f_hz - l.f_hz) / 2.0)),
+                               float(np.hypot(m.zeta_std, (h.zeta - l.zeta) / 2.0)))
+                          for m, h, l in zip(fit.modes, hi.modes, lo.modes))
+        return FRFFit(params=params, cov=cov, modes=modes, chi2=fit.chi2, dof=fit.dof, G_fit=fit.G_fit,
+                      output=fit.output, gravity_stiffness=g, gravity_stiffness_std=g_sd)
     for n_, v_ in fixed.items():
         if n_ not in TWO_INERTIA_PARAMS or not np.isfinite(v_) or v_ < 0 or (n_ in "JIk" and v_ <= 0):
             raise InputError(None, f"fixed.{n_}", f"one of {TWO_INERTIA_PARAMS} with a valid value", v_)
@@ -226,7 +279,7 @@ def fit_two_inertia(frf: FRF, *, output: str = "motor", fixed: dict | None = Non
 
     def resid(x):
         with np.errstate(all="ignore"):              # a trial step far out: a large residual, not a warning
-            e = (G - two_inertia_frf(f, *natural(full(x)), output=output)) / sd
+            e = (G - two_inertia_frf(f, *natural(full(x)), output=output, g=g)) / sd
             r = np.concatenate([e.real, e.imag])
         return np.where(np.isfinite(r), r, 1e150)
 
@@ -260,11 +313,14 @@ def fit_two_inertia(frf: FRF, *, output: str = "motor", fixed: dict | None = Non
     std = np.sqrt(np.maximum(np.diag(cov), 0.0))
     params = {n_: Parameter(n_, float(val[i]), float(std[i])) for i, n_ in enumerate(TWO_INERTIA_PARAMS)}
 
-    base = two_inertia_modes(*val, output=output)
+    if g != 0.0 and not val[2] + g > 0:
+        raise InputError(None, "gravity_stiffness", f"a gravity stiffness the fitted spring outweighs (k + g > 0, "
+                         f"k {val[2]:.4g} N m/rad)", g, hint="check its sign: g = G'(q0) with I q'' + G(q) = spring torque")
+    base = two_inertia_modes(*val, output=output, g=g)
     modes = []
     if base:
         def mode_vec(x):
-            m = two_inertia_modes(*natural(full(x)), output=output)
+            m = two_inertia_modes(*natural(full(x)), output=output, g=g)
             if [kk for kk, _, _ in m] != [kk for kk, _, _ in base]:
                 return np.full(2 * len(base), np.nan)
             return np.array([v_ for _, ff, zz in m for v_ in (ff, zz)])
@@ -286,4 +342,4 @@ def fit_two_inertia(frf: FRF, *, output: str = "motor", fixed: dict | None = Non
         for i, (kind, fr, z) in enumerate(base):
             modes.append(Mode(kind, fr, z, float(sm[2 * i]), float(sm[2 * i + 1])))
     return FRFFit(params=params, cov=cov, modes=tuple(modes), chi2=chi2, dof=dof,
-                  G_fit=two_inertia_frf(frf.f_hz, *val, output=output), output=output)
+                  G_fit=two_inertia_frf(frf.f_hz, *val, output=output, g=g), output=output, gravity_stiffness=g)

@@ -89,7 +89,7 @@ def find_period(x, *, exact: bool) -> int | None:
 def run_frf(path, out, *, input: str, output: str, reference: str | None = None, time: str | None = None,
             period_s: float | None = None, model: str = "two_inertia", transient="auto", realisations: int = 1,
             estimator: str = "auto", single_record: bool = False, order=None, steady_period: bool = False,
-            compare=None, joint: str | None = None) -> dict:
+            compare=None, joint: str | None = None, gravity_stiffness: float | None = None) -> dict:
     """``mocapfj frf``: the FRF of column `output` over column `input` (Makarov et al. 2012, eq. 23-27),
     and the two-inertia model fitted to it with its modes.
 
@@ -105,6 +105,12 @@ def run_frf(path, out, *, input: str, output: str, reference: str | None = None,
     identification of the same joint (an identify.json, its directory or a run directory), joint
     `joint` (default its only one): the two-inertia parameters held against it
     (:func:`mocapfj.ident.crosscheck.cross_check`), in the summary's ``comparison``.
+
+    gravity_stiffness : the link's gravity stiffness g = G'(q0), N m/rad, at the record's operating
+    point (:mod:`mocapfj.ident.frf_fit`), held in the two-inertia fit. None: from `compare`'s
+    gravity parameters when identify determined them (g = -mglx cos q0 - mgly sin q0, q0 the mean
+    of the `output` column: a link-side angle in identify's convention, as the controller log's
+    motor column is), else 0. The summary's ``gravity`` says which, and what g is worth in k.
     """
     from ..ident.frf import estimate_frf
     from ..ident.frf_fit import fit_two_inertia
@@ -164,8 +170,13 @@ def run_frf(path, out, *, input: str, output: str, reference: str | None = None,
         if e.file == "<argument>" and e.field in col_of:
             raise InputError(csv, f"column {col_of[e.field]!r}", e.expected, e.got, e.hint) from None
         raise
-    fit = fit_two_inertia(frf) if model == "two_inertia" else None
+    gravity = _gravity_stiffness(gravity_stiffness, reference_ident, cols["--output"])
+    fit = fit_two_inertia(frf, gravity_stiffness=gravity["g_Nm_per_rad"],
+                          gravity_stiffness_std=gravity.get("g_std_Nm_per_rad", 0.0)) if model == "two_inertia" else None
+    if fit is not None:
+        gravity["share_of_k_pct"] = 100.0 * gravity["g_Nm_per_rad"] / fit.value("k")
     summary = {"file": str(csv), "input": input, "output": output, "reference": reference, "fs_hz": fs,
+               "gravity": gravity,
                "period_s": n / fs, "period_samples": n,
                "transient_periods": T // n - frf.n_periods if T // n >= frf.n_periods else None, "frf": frf.to_dict(),
                "model": None if fit is None else fit.to_dict(),
@@ -175,6 +186,32 @@ def run_frf(path, out, *, input: str, output: str, reference: str | None = None,
         summary["comparison"] = compare_with_identify(summary, *reference_ident)
     _write(out, summary, frf, fit)
     return summary
+
+
+def _gravity_stiffness(given, reference_ident, y) -> dict:
+    """{"g_Nm_per_rad", "source", ...}: the gravity stiffness the two-inertia fit holds (run_frf)."""
+    if given is not None:
+        g = float(given)
+        if not np.isfinite(g):
+            raise InputError(None, "gravity-stiffness", "a finite gravity stiffness in N m/rad", given)
+        return {"g_Nm_per_rad": g, "g_std_Nm_per_rad": 0.0, "source": "given"}
+    if reference_ident is not None:
+        _, params, src = reference_ident
+        gp = {n: params.get(n) for n in ("mglx", "mgly")}
+        if all(isinstance(p, dict) and p.get("determined", True) and np.isfinite(p.get("value", np.nan))
+               for p in gp.values()):
+            q0 = float(np.mean(y))
+            mglx, mgly = float(gp["mglx"]["value"]), float(gp["mgly"]["value"])
+            g = -mglx * np.cos(q0) - mgly * np.sin(q0)
+            # its SD from theirs, taken as independent (identify.json gives no covariance)
+            sd = float(np.hypot(np.cos(q0) * float(gp["mglx"].get("std", 0.0) or 0.0),
+                                np.sin(q0) * float(gp["mgly"].get("std", 0.0) or 0.0)))
+            return {"g_Nm_per_rad": float(g), "g_std_Nm_per_rad": sd if np.isfinite(sd) else 0.0,
+                    "source": f"identify's mglx {mglx:.4g}, mgly {mgly:.4g} N m at the record's mean angle "
+                    f"{q0:.4g} rad ({src})", "q0_rad": q0}
+        return {"g_Nm_per_rad": 0.0, "source": "none: identify did not determine mglx and mgly"}
+    return {"g_Nm_per_rad": 0.0, "source": "none given (a joint gravity acts on: pass --gravity-stiffness or "
+            "--compare, else the fit reads g into k and I)"}
 
 
 def read_identified_joint(path, joint: str | None = None) -> tuple[str, dict, str]:
@@ -221,7 +258,8 @@ def compare_with_identify(summary: dict, joint: str, params: dict, source: str) 
         out["lines"] = out["lines"] + [f"v: {note}"]
     try:
         pv = {n: float(params[n]["value"]) for n in ("J", "I", "k", "b", "v")}
-        pred = two_inertia_modes(J=pv["J"], I=pv["I"], k=pv["k"], d=0.0, b=pv["b"], v=pv["v"])
+        g = float((summary.get("gravity") or {}).get("g_Nm_per_rad", 0.0))
+        pred = two_inertia_modes(J=pv["J"], I=pv["I"], k=pv["k"], d=0.0, b=pv["b"], v=pv["v"], g=g)
         by_kind = {kind: f for kind, f, _ in pred}
         out["modes"] = [{"kind": m["kind"], "f_hz_frf": m["f_hz"], "f_hz_std_frf": m.get("f_hz_std"),
                          "f_hz_identify": by_kind[m["kind"]], "diff_pct": 100.0 * (m["f_hz"] / by_kind[m["kind"]] - 1.0)}

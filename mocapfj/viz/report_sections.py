@@ -397,6 +397,16 @@ def _frf_section(root: Path, d: dict, path: Path) -> Section:
                      for p, e in model["params"].items())
         blocks.append(Paragraph(f"Fitted model {model['name']}: chi²/dof {fmt(model.get('chi2_red'), 3)} "
                                 f"({fmt(model.get('chi2'), 4)} over {model.get('dof')} degrees of freedom)."))
+        grav = d.get("gravity") or {}
+        if grav.get("g_Nm_per_rad"):
+            blocks.append(Paragraph(f"The link's gravity stiffness about its operating point is held at "
+                                    f"{pm(grav['g_Nm_per_rad'], grav.get('g_std_Nm_per_rad'))} N m/rad "
+                                    f"({fmt(grav.get('share_of_k_pct'), 3)} % of k; {grav.get('source', '')}); "
+                                    "its SD is counted in the parameters'."))
+        elif model.get("name") == "two_inertia":
+            blocks.append(Paragraph("No gravity stiffness was held: on a joint gravity acts on, the fit reads it "
+                                    "into k and I (pass --gravity-stiffness, or --compare an identification "
+                                    "with its gravity parameters)."))
         blocks.append(Table(("parameter", "meaning", "value ± SD", "unit"), rows))
     modes = d.get("modes") or []
     if modes:
@@ -452,7 +462,7 @@ def _model_curve(model: dict | None, f_hz: np.ndarray) -> np.ndarray | None:
         from ..ident.frf_fit import two_inertia_frf
 
         return two_inertia_frf(f_hz, p["J"], p["I"], p["k"], p.get("d", 0.0), p.get("b", 0.0), p.get("v", 0.0),
-                               output=model.get("output", "motor"))
+                               output=model.get("output", "motor"), g=float(model.get("gravity_stiffness") or 0.0))
     if model.get("name") == "rational" and model.get("order") and model.get("w_norm"):
         from ..ident.frf_single import rational_frf
 

@@ -2,7 +2,7 @@
 FRF tests and benchmarks/bench_frf.py (no code shared with mocapfj.ident.frf or frf_fit).
 
 State x = (q_m, q_m', q, q'); plant
-    J q_m'' = u + w - b q_m' - k (q_m - q) - d (q_m' - q'),   I q'' = -v q' + k (q_m - q) + d (q_m' - q'),
+    J q_m'' = u + w - b q_m' - k (q_m - q) - d (q_m' - q'),   I q'' = -v q' - g q + k (q_m - q) + d (q_m' - q'),
 controller u = kp (r - q_m) + kd (r' - q_m') (continuous, like mocapfj.dynamics.simulate.PID), or
 open loop u = the multisine itself. The multisine's part of the response is the exact periodic
 steady state from the state-space matrices at each line; the process noise w (a torque on the motor,
@@ -15,11 +15,12 @@ import numpy as np
 from scipy.linalg import expm
 
 
-def plant_matrices(J, I, k, d, b, v):
+def plant_matrices(J, I, k, d, b, v, g=0.0):
+    """g: the link's gravity stiffness about the operating point (I q'' = ... - g q)."""
     A = np.array([[0, 1, 0, 0],
                   [-k / J, -(b + d) / J, k / J, d / J],
                   [0, 0, 0, 1],
-                  [k / I, d / I, -k / I, -(v + d) / I]], float)
+                  [k / I, d / I, -(k + g) / I, -(v + d) / I]], float)
     B = np.array([0, 1 / J, 0, 0], float)
     return A, B
 

@@ -158,3 +158,33 @@ def test_compare_with_the_time_domain_identification(record, capsys, tmp_path):
     code, out, err = _run(capsys, d / "log.csv", "--input", "tau", "--output", "qm", "--single-record",
                           "--compare", good, "--out", tmp_path / "o3")
     assert code == 2 and "compare" in err and err.count("\n") == 1
+
+
+def test_gravity_stiffness_from_the_identification_or_given(capsys, tmp_path):
+    """A link under gravity about its operating point (g = -5 % of k): with --compare, g comes from
+    identify's mglx, mgly at the record's mean angle and the fit recovers k (within 1 % and 4 SDs,
+    the SD counting g's); --gravity-stiffness 0 leaves it in k (5-9 % off); a non-finite g is one line,
+    exit 2."""
+    g_true = -0.05 * P["k"]
+    ms = design_multisine(FS, 1024, 0.5, 12.0, rms=0.01, seed=7)
+    u, y, r = simulate_multisine({**P, "g": g_true}, [ms], 6, kp=300.0, kd=30.0, noise_sd=1.0, seed=8)
+    write_csv_columns(tmp_path / "log.csv", {"time": np.arange(u.shape[1]) / FS, "tau": u[0], "qm": y[0], "qref": r[0]})
+    q0 = float(np.mean(y[0]))
+    mglx = -g_true / np.cos(q0)                          # g = -mglx cos q0 - mgly sin q0 with mgly = 0
+    truth = {n: (P[n], 0.01 * P[n]) for n in ("J", "I", "k", "b", "v")}
+    ident = _identify_json(tmp_path / "id.json", {**truth, "mglx": (mglx, 0.02 * abs(mglx)), "mgly": (1e-6, 0.5)})
+    args = (tmp_path / "log.csv", "--input", "tau", "--output", "qm", "--reference", "qref")
+    code, out, err = _run(capsys, *args, "--compare", ident, "--out", tmp_path / "o", "--json")
+    assert code == 0, err
+    s = json.loads(out)
+    grav = s["gravity"]
+    assert grav["g_Nm_per_rad"] == pytest.approx(g_true, rel=1e-6) and "identify's mglx" in grav["source"]
+    assert grav["g_std_Nm_per_rad"] == pytest.approx(0.02 * abs(g_true), rel=1e-3)
+    k = s["model"]["params"]["k"]
+    assert abs(k["value"] / P["k"] - 1) < 0.01 and abs(k["value"] - P["k"]) < 4 * k["std"], k
+    assert s["model"]["gravity_stiffness"] == grav["g_Nm_per_rad"]
+    code, out, err = _run(capsys, *args, "--gravity-stiffness", "0", "--out", tmp_path / "o0", "--json")
+    k0 = json.loads(out)["model"]["params"]["k"]
+    assert code == 0 and 0.05 < k0["value"] / P["k"] - 1 < 0.09, k0
+    code, out, err = _run(capsys, *args, "--gravity-stiffness", "nan", "--out", tmp_path / "o1")
+    assert code == 2 and "gravity-stiffness" in err and err.count("\n") == 1, err
