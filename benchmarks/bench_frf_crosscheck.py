@@ -55,8 +55,9 @@ def case(coulomb: bool, seed: int, workdir: Path) -> dict:
     q_ref = reference_trajectory(ref_table)(ctl["time"])[0]
     write_csv_columns(workdir / "log.csv", {"time": ctl["time"], "tau": ctl["tau_j2"], "qm": ctl["qm_j2"],
                                             "qref": q_ref})
-    # as a user runs it: `mocapfj frf ... --compare identify.json` (the gravity stiffness from
-    # identify's mglx, mgly), and without the gravity term (--gravity-stiffness 0)
+    # as a user runs it: `mocapfj frf ... --compare identify.json` (the gravity stiffness fitted and
+    # held against the one identify's mglx, mgly imply), and without the gravity term
+    # (--gravity-stiffness 0)
     s = run_frf(workdir / "log.csv", workdir / "frf", input="tau", output="qm", reference="qref", period_s=N / FS,
                 compare=workdir / "identify.json")
     s0 = run_frf(workdir / "log.csv", workdir / "frf0", input="tau", output="qm", reference="qref", period_s=N / FS,
@@ -78,7 +79,7 @@ def main() -> None:
     ap.add_argument("--quick", action="store_true", help="one seed per variant")
     args = ap.parse_args()
     seeds = (61,) if args.quick else (61, 62)
-    print("| Coulomb | seed | g from identify (true) N m/rad | k FRF err % (SD %) | k FRF without g err % (SD %) | "
+    print("| Coulomb | seed | g FRF +- SD; identify's; true (N m/rad) | k FRF err % (SD %) | k FRF without g err % (SD %) | "
           "k identify err % (SD %) | anti-res err % | res err % | verdict | sim+ident+frf s |")
     print("|---|---|---|---|---|---|---|---|---|---|")
     for coulomb in (False, True):
@@ -92,8 +93,10 @@ def main() -> None:
             fa = m.get("antiresonance")
             fr = m.get("resonance")
             k0 = r["k_frf_nog"]
-            print(f"| {'9.28 N m' if coulomb else 'none'} | {seed} | {r['gravity']['g_Nm_per_rad']:.1f} "
-                  f"({r['g_true']:.1f}) | {100 * (kf['value'] / kt - 1):+.2f} "
+            gr = r["gravity"]
+            print(f"| {'9.28 N m' if coulomb else 'none'} | {seed} | {gr['g_Nm_per_rad']:.1f} +- "
+                  f"{gr['g_std_Nm_per_rad']:.1f}; {gr.get('identify', {}).get('value', float('nan')):.1f}; "
+                  f"{r['g_true']:.1f} | {100 * (kf['value'] / kt - 1):+.2f} "
                   f"({100 * kf['std'] / kf['value']:.2f}) | {100 * (k0['value'] / kt - 1):+.2f} "
                   f"({100 * k0['std'] / k0['value']:.2f}) | {100 * (ki['value'] / kt - 1):+.2f} "
                   f"({100 * ki['std'] / ki['value']:.2f}) | "

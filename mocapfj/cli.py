@@ -596,9 +596,9 @@ def _cmd_frf(args) -> int:
         if s["model"]:
             m = s["model"]
             g = s.get("gravity") or {}
-            if g.get("g_Nm_per_rad"):
-                lines.append(f"  gravity stiffness held: {g['g_Nm_per_rad']:.4g} +- {g.get('g_std_Nm_per_rad', 0):.2g} N m/rad ({g.get('share_of_k_pct', 0):+.2f} % "
-                             f"of k), {g['source']}")
+            if "g_Nm_per_rad" in g:
+                lines.append(f"  gravity stiffness {g['g_Nm_per_rad']:.4g} +- {g.get('g_std_Nm_per_rad', 0):.2g} N m/rad "
+                             f"({g.get('share_of_k_pct', 0):+.2f} % of k), {g['source']}")
             lines.append(f"  {m['name']}: " + ", ".join(f"{n} {p['value']:.4g} +- {p['std']:.2g}" for n, p in m["params"].items())
                          + f" (chi2/dof {m['chi2_red']:.2f})")
             for md in s["modes"]:
@@ -888,8 +888,8 @@ def build_parser() -> argparse.ArgumentParser:
     fr.add_argument("--joint", default=None, help="with --compare: the joint of the identification (default its only one)")
     fr.add_argument("--gravity-stiffness", type=float, default=None, metavar="G",
                     help="the link's gravity stiffness G'(q0) at the operating point, N m/rad (negative when gravity "
-                         "pulls the link away from it), held in the two-inertia fit; default from --compare's mglx, "
-                         "mgly at the record's mean angle, else 0")
+                         "pulls the link away from it), held in the two-inertia fit; default: fitted with the rest "
+                         "(and, with --compare, held against the one identify's mglx, mgly imply)")
     fr.add_argument("--out", required=True, help="output directory")
     fr.add_argument("--json", action="store_true", help="print a JSON summary on stdout")
     fr.set_defaults(func=_cmd_frf)

@@ -58,6 +58,7 @@ __all__ = ["TWO_INERTIA_PARAMS", "FRF_MODELS", "Mode", "FRFFit", "two_inertia_fr
            "fit_two_inertia"]
 
 TWO_INERTIA_PARAMS = ("J", "I", "k", "d", "b", "v")
+_NAMES = TWO_INERTIA_PARAMS + ("g",)
 FRF_MODELS = ("two_inertia",)
 _OUTPUTS = ("motor", "link")
 
@@ -81,14 +82,15 @@ class Mode:
 class FRFFit:
     """The two-inertia model fitted to an FRF.
 
-    params : dict name -> Parameter (J, I kg m^2; k N m/rad; d, b, v N m s/rad), value and SD
-    cov : (6, 6) covariance of (J, I, k, d, b, v) (rows and columns of fixed parameters zero)
+    params : dict name -> Parameter (J, I kg m^2; k N m/rad; d, b, v N m s/rad; g N m/rad), value and SD
+    cov : (7, 7) covariance of (J, I, k, d, b, v, g) (rows and columns of held parameters zero, but
+        for g held with an SD)
     modes : tuple of Mode, anti-resonance first (motor output), then the resonance
     chi2, dof : weighted residual sum of squares and its degrees of freedom (2 K - free parameters)
     G_fit : (K,) complex, the model at the FRF's frequencies
     output : "motor" or "link"
-    gravity_stiffness, gravity_stiffness_std : the link's gravity stiffness held in the fit and its
-        SD (counted in the parameters' SDs), N m/rad
+    gravity_stiffness, gravity_stiffness_std : the link's gravity stiffness and its SD, N m/rad:
+        fitted (gravity_fitted), or held (its SD then counted in the other parameters' SDs)
     """
 
     params: dict
@@ -101,6 +103,7 @@ class FRFFit:
     model: str = "two_inertia"
     gravity_stiffness: float = 0.0
     gravity_stiffness_std: float = 0.0
+    gravity_fitted: bool = False
 
     @property
     def chi2_red(self) -> float:
@@ -111,7 +114,7 @@ class FRFFit:
 
     def to_dict(self) -> dict:
         return {"name": self.model, "output": self.output, "gravity_stiffness": self.gravity_stiffness,
-                "gravity_stiffness_std": self.gravity_stiffness_std,
+                "gravity_stiffness_std": self.gravity_stiffness_std, "gravity_fitted": self.gravity_fitted,
                 "params": {n: {"value": p.value, "std": p.std, "rel_std_pct": p.rel_std_pct}
                            for n, p in self.params.items()},
                 "chi2": self.chi2, "dof": self.dof, "chi2_red": self.chi2_red,
@@ -145,7 +148,11 @@ def two_inertia_modes(J, I, k, d=0.0, b=0.0, v=0.0, *, output: str = "motor",
     out = []
     if output == "motor":
         out += [("antiresonance", *_fz(r)) for r in np.roots(nm) if r.imag > 0]
-    out += [("resonance", *_fz(r)) for r in np.roots(D) if r.imag > 0]
+    # the resonance: the fastest complex pole pair (with gravity a second, slow pair can appear: the
+    # whole joint swinging on gravity's stiffness, g > 0, which is not a mode of the drive)
+    poles = [r for r in np.roots(D) if r.imag > 0]
+    if poles:
+        out.append(("resonance", *_fz(max(poles, key=abs))))
     return out
 
 
@@ -200,7 +207,7 @@ def _initial(frf: FRF, output: str):
 
 
 def fit_two_inertia(frf: FRF, *, output: str = "motor", fixed: dict | None = None, f_band_hz=None,
-                    gravity_stiffness: float = 0.0, gravity_stiffness_std: float = 0.0) -> FRFFit:
+                    gravity_stiffness: float | None = None, gravity_stiffness_std: float = 0.0) -> FRFFit:
     """Fit (J, I, k, d, b, v) of the two-inertia joint to `frf` by weighted nonlinear least squares.
 
     Parameters
@@ -214,9 +221,12 @@ def fit_two_inertia(frf: FRF, *, output: str = "motor", fixed: dict | None = Non
         Parameters held at known values (e.g. the rigid part known: ``{"J": ...}``).
     f_band_hz : (lo, hi) or None
         Fit only the lines inside this band.
-    gravity_stiffness : float
-        g = G'(q0), N m/rad, the link's gravity stiffness at the operating point, from the rigid
-        model (module docstring); 0 for a joint gravity does not act on (or a horizontal one).
+    gravity_stiffness : float or None
+        g = G'(q0), N m/rad, the link's gravity stiffness at the operating point (module
+        docstring), held at this value (from the rigid model; 0 for a joint gravity does not act
+        on). None: fitted with the rest (``params["g"]``) from the motor-side FRF, whose lowest
+        lines carry it (|G| ~ 1 / ((J + I) w^2 - g) below the anti-resonance); held at 0 for a
+        link-side FRF, which has one coefficient fewer.
     gravity_stiffness_std : float
         Its SD: the fit is repeated at g +- SD and half the change of every parameter and mode is
         added (in quadrature) to its SD (k takes up nearly all of it: dk/dg is about -1).
@@ -226,19 +236,21 @@ def fit_two_inertia(frf: FRF, *, output: str = "motor", fixed: dict | None = Non
     if output not in _OUTPUTS:
         raise InputError(None, "output", "motor or link", output)
     fixed = dict(fixed or {})
-    g, g_sd = float(gravity_stiffness), float(gravity_stiffness_std)
+    fit_g = gravity_stiffness is None and output == "motor"
+    g = 0.0 if gravity_stiffness is None else float(gravity_stiffness)
+    g_sd = float(gravity_stiffness_std)
     if not np.isfinite(g):
         raise InputError(None, "gravity_stiffness", "a finite gravity stiffness in N m/rad", gravity_stiffness)
     if not (np.isfinite(g_sd) and g_sd >= 0):
         raise InputError(None, "gravity_stiffness_std", "a finite SD >= 0 in N m/rad", gravity_stiffness_std)
-    if g_sd > 0:
+    if g_sd > 0 and not fit_g:
         fit = fit_two_inertia(frf, output=output, fixed=fixed, f_band_hz=f_band_hz, gravity_stiffness=g)
         hi, lo = (fit_two_inertia(frf, output=output, fixed=fixed, f_band_hz=f_band_hz, gravity_stiffness=g + s * g_sd)
                   for s in (1.0, -1.0))
-        dv = np.array([(hi.value(n_) - lo.value(n_)) / 2.0 for n_ in TWO_INERTIA_PARAMS])
+        dv = np.array([(hi.value(n_) - lo.value(n_)) / 2.0 for n_ in TWO_INERTIA_PARAMS] + [g_sd])
         cov = fit.cov + np.outer(dv, dv)
         params = {n_: Parameter(n_, fit.value(n_), float(np.sqrt(max(cov[i, i], 0.0))))
-                  for i, n_ in enumerate(TWO_INERTIA_PARAMS)}
+                  for i, n_ in enumerate(_NAMES)}
         modes = fit.modes
         if [m.kind for m in hi.modes] == [m.kind for m in fit.modes] == [m.kind for m in lo.modes]:
             modes = tuple(Mode(m.kind, m.f_hz, m.zeta, float(np.hypot(m.f_hz_std, (h.f_hz - l.f_hz) / 2.0)),
@@ -255,7 +267,8 @@ def fit_two_inertia(frf: FRF, *, output: str = "motor", fixed: dict | None = Non
     if output == "link" and not fixed:
         raise InputError(None, "fixed", "one parameter held at a known value for a link-side FRF (e.g. the motor "
                          "inertia J): q / u has 5 independent coefficients for 6 parameters", "none")
-    free = [i for i, n_ in enumerate(TWO_INERTIA_PARAMS) if n_ not in fixed]
+    fixed = {**fixed, **({} if fit_g else {"g": g})}
+    free = [i for i, n_ in enumerate(_NAMES) if n_ not in fixed]
     if 2 * sel.sum() <= len(free):
         raise InputError(None, "frf", f"more than {len(free) / 2:.0f} excited lines to fit {len(free)} parameters",
                          int(sel.sum()))
@@ -263,13 +276,13 @@ def fit_two_inertia(frf: FRF, *, output: str = "motor", fixed: dict | None = Non
     sd = np.sqrt(np.maximum(frf.var[sel], (1e-10 * np.abs(frf.G[sel])) ** 2 + 1e-300) / 2.0)   # noise-free: 1e-10
     sub = FRF(f, G, frf.var[sel], None, frf.coherence[sel], frf.lines[sel], frf.estimator, frf.n_periods,
               frf.n_realisations, frf.fs_hz, frf.n_samples, frf.closed_loop, frf.distortion)
-    starts = _initial(sub, output)
-    log = np.array([True, True, True, False, False, False])
+    starts = [p0 + (g,) for p0 in _initial(sub, output)]
+    log = np.array([True, True, True, False, False, False, False])
 
     def full(x):
-        th = np.empty(6)
+        th = np.empty(7)
         th[free] = x
-        for i, n_ in enumerate(TWO_INERTIA_PARAMS):
+        for i, n_ in enumerate(_NAMES):
             if n_ in fixed:
                 th[i] = np.log(fixed[n_]) if log[i] else fixed[n_]
         return th
@@ -279,22 +292,35 @@ def fit_two_inertia(frf: FRF, *, output: str = "motor", fixed: dict | None = Non
 
     def resid(x):
         with np.errstate(all="ignore"):              # a trial step far out: a large residual, not a warning
-            e = (G - two_inertia_frf(f, *natural(full(x)), output=output, g=g)) / sd
+            p_ = natural(full(x))
+            e = (G - two_inertia_frf(f, *p_[:6], output=output, g=p_[6])) / sd
             r = np.concatenate([e.real, e.imag])
         return np.where(np.isfinite(r), r, 1e150)
 
-    lb = np.where(log, -np.inf, 0.0)[free]
+    lb = np.where(log, -np.inf, 0.0)
+    lb[6] = -np.inf
+    lb = lb[free]
     best = None
-    for p0 in starts:
+
+    def solve(p0):
         th0 = np.where(log, np.log(np.maximum(p0, 1e-300)), p0)
         x0 = np.clip(th0[free], lb, np.inf)
         x0 = np.where(np.isfinite(lb) & (x0 <= lb), lb + 1e-9, x0)
         try:
-            sol = least_squares(resid, x0, bounds=(lb, np.inf), x_scale="jac", method="trf", max_nfev=2000,
-                                xtol=1e-12, ftol=1e-12)
+            return least_squares(resid, x0, bounds=(lb, np.inf), x_scale="jac", method="trf", max_nfev=2000,
+                                 xtol=1e-12, ftol=1e-12)
         except ValueError:
-            continue
-        if best is None or sol.cost < best.cost:
+            return None
+
+    if fit_g:
+        # from the fit with g held at 0, then g free from there and from +-2 % of its k
+        held = fit_two_inertia(frf, output=output, fixed={n_: v_ for n_, v_ in fixed.items() if n_ != "g"},
+                               f_band_hz=f_band_hz, gravity_stiffness=0.0)
+        v0 = [held.value(n_) for n_ in TWO_INERTIA_PARAMS]
+        starts = [tuple(v0) + (s * v0[2],) for s in (0.0, -0.02, 0.02)] + starts
+    for p0 in starts:
+        sol = solve(np.asarray(p0, dtype=np.float64))
+        if sol is not None and (best is None or sol.cost < best.cost):
             best = sol
     if best is None or not np.all(np.isfinite(best.x)):
         raise InputError(None, "frf", "an FRF the two-inertia model can be fitted to", "no convergence")
@@ -311,16 +337,17 @@ def fit_two_inertia(frf: FRF, *, output: str = "motor", fixed: dict | None = Non
     Jn = np.diag(np.where(log, val, 1.0))[:, free]          # d natural / d x
     cov = Jn @ cov_x @ Jn.T
     std = np.sqrt(np.maximum(np.diag(cov), 0.0))
-    params = {n_: Parameter(n_, float(val[i]), float(std[i])) for i, n_ in enumerate(TWO_INERTIA_PARAMS)}
-
-    if g != 0.0 and not val[2] + g > 0:
+    params = {n_: Parameter(n_, float(val[i]), float(std[i])) for i, n_ in enumerate(_NAMES)}
+    g = float(val[6])
+    if not val[2] + g > 0:
         raise InputError(None, "gravity_stiffness", f"a gravity stiffness the fitted spring outweighs (k + g > 0, "
                          f"k {val[2]:.4g} N m/rad)", g, hint="check its sign: g = G'(q0) with I q'' + G(q) = spring torque")
-    base = two_inertia_modes(*val, output=output, g=g)
+    base = two_inertia_modes(*val[:6], output=output, g=g)
     modes = []
     if base:
         def mode_vec(x):
-            m = two_inertia_modes(*natural(full(x)), output=output, g=g)
+            p_ = natural(full(x))
+            m = two_inertia_modes(*p_[:6], output=output, g=p_[6])
             if [kk for kk, _, _ in m] != [kk for kk, _, _ in base]:
                 return np.full(2 * len(base), np.nan)
             return np.array([v_ for _, ff, zz in m for v_ in (ff, zz)])
@@ -342,4 +369,5 @@ def fit_two_inertia(frf: FRF, *, output: str = "motor", fixed: dict | None = Non
         for i, (kind, fr, z) in enumerate(base):
             modes.append(Mode(kind, fr, z, float(sm[2 * i]), float(sm[2 * i + 1])))
     return FRFFit(params=params, cov=cov, modes=tuple(modes), chi2=chi2, dof=dof,
-                  G_fit=two_inertia_frf(frf.f_hz, *val, output=output, g=g), output=output, gravity_stiffness=g)
+                  G_fit=two_inertia_frf(frf.f_hz, *val[:6], output=output, g=g), output=output, gravity_stiffness=g,
+                  gravity_stiffness_std=float(std[6]), gravity_fitted=fit_g)

@@ -107,10 +107,11 @@ def run_frf(path, out, *, input: str, output: str, reference: str | None = None,
     (:func:`mocapfj.ident.crosscheck.cross_check`), in the summary's ``comparison``.
 
     gravity_stiffness : the link's gravity stiffness g = G'(q0), N m/rad, at the record's operating
-    point (:mod:`mocapfj.ident.frf_fit`), held in the two-inertia fit. None: from `compare`'s
-    gravity parameters when identify determined them (g = -mglx cos q0 - mgly sin q0, q0 the mean
-    of the `output` column: a link-side angle in identify's convention, as the controller log's
-    motor column is), else 0. The summary's ``gravity`` says which, and what g is worth in k.
+    point (:mod:`mocapfj.ident.frf_fit`), held in the two-inertia fit; None: fitted with the rest.
+    With `compare`, the g identify's gravity parameters imply (g = -mglx cos q0 - mgly sin q0, q0
+    the mean of the `output` column: a link-side angle in identify's convention, as the controller
+    log's motor column is) is compared with the FRF's like the other parameters. The summary's
+    ``gravity`` says which, and what g is worth in k.
     """
     from ..ident.frf import estimate_frf
     from ..ident.frf_fit import fit_two_inertia
@@ -171,10 +172,10 @@ def run_frf(path, out, *, input: str, output: str, reference: str | None = None,
             raise InputError(csv, f"column {col_of[e.field]!r}", e.expected, e.got, e.hint) from None
         raise
     gravity = _gravity_stiffness(gravity_stiffness, reference_ident, cols["--output"])
-    fit = fit_two_inertia(frf, gravity_stiffness=gravity["g_Nm_per_rad"],
-                          gravity_stiffness_std=gravity.get("g_std_Nm_per_rad", 0.0)) if model == "two_inertia" else None
+    fit = fit_two_inertia(frf, gravity_stiffness=gravity.get("g_Nm_per_rad")) if model == "two_inertia" else None
     if fit is not None:
-        gravity["share_of_k_pct"] = 100.0 * gravity["g_Nm_per_rad"] / fit.value("k")
+        gravity.update(g_Nm_per_rad=fit.gravity_stiffness, g_std_Nm_per_rad=fit.gravity_stiffness_std,
+                       share_of_k_pct=100.0 * fit.gravity_stiffness / fit.value("k"))
     summary = {"file": str(csv), "input": input, "output": output, "reference": reference, "fs_hz": fs,
                "gravity": gravity,
                "period_s": n / fs, "period_samples": n,
@@ -189,12 +190,23 @@ def run_frf(path, out, *, input: str, output: str, reference: str | None = None,
 
 
 def _gravity_stiffness(given, reference_ident, y) -> dict:
-    """{"g_Nm_per_rad", "source", ...}: the gravity stiffness the two-inertia fit holds (run_frf)."""
+    """{"g_Nm_per_rad" (given only), "source"[, "identify"]}: the gravity stiffness the two-inertia fit
+    holds, or that it fits it, and what identify's gravity parameters imply (run_frf)."""
     if given is not None:
         g = float(given)
         if not np.isfinite(g):
             raise InputError(None, "gravity-stiffness", "a finite gravity stiffness in N m/rad", given)
-        return {"g_Nm_per_rad": g, "g_std_Nm_per_rad": 0.0, "source": "given"}
+        return {"g_Nm_per_rad": g, "source": "given (--gravity-stiffness)"}
+    out = {"source": "fitted with the rest (the FRF's lowest lines carry it)"}
+    implied = _implied_gravity(reference_ident, y)
+    if implied is not None:
+        out["identify"] = implied
+    return out
+
+
+def _implied_gravity(reference_ident, y) -> dict | None:
+    """The gravity stiffness identify's mglx, mgly imply at the record's mean angle, with its SD,
+    or None when identify did not determine them."""
     if reference_ident is not None:
         _, params, src = reference_ident
         gp = {n: params.get(n) for n in ("mglx", "mgly")}
@@ -206,12 +218,10 @@ def _gravity_stiffness(given, reference_ident, y) -> dict:
             # its SD from theirs, taken as independent (identify.json gives no covariance)
             sd = float(np.hypot(np.cos(q0) * float(gp["mglx"].get("std", 0.0) or 0.0),
                                 np.sin(q0) * float(gp["mgly"].get("std", 0.0) or 0.0)))
-            return {"g_Nm_per_rad": float(g), "g_std_Nm_per_rad": sd if np.isfinite(sd) else 0.0,
+            return {"value": float(g), "std": sd if np.isfinite(sd) else 0.0,
                     "source": f"identify's mglx {mglx:.4g}, mgly {mgly:.4g} N m at the record's mean angle "
                     f"{q0:.4g} rad ({src})", "q0_rad": q0}
-        return {"g_Nm_per_rad": 0.0, "source": "none: identify did not determine mglx and mgly"}
-    return {"g_Nm_per_rad": 0.0, "source": "none given (a joint gravity acts on: pass --gravity-stiffness or "
-            "--compare, else the fit reads g into k and I)"}
+    return None
 
 
 def read_identified_joint(path, joint: str | None = None) -> tuple[str, dict, str]:
@@ -247,8 +257,11 @@ def compare_with_identify(summary: dict, joint: str, params: dict, source: str) 
     from ..ident.crosscheck import cross_check
     from ..ident.frf_fit import two_inertia_modes
 
+    implied = (summary.get("gravity") or {}).get("identify")
+    if implied is not None:
+        params = {**params, "g": {"value": implied["value"], "std": implied["std"]}}
     c = cross_check(summary["model"]["params"], params, method_a="frf", method_b="identify", joint=joint,
-                    names=("k", "J", "I", "b", "v"))
+                    names=("k", "J", "I", "b", "v", "g"))
     out = {"source": source, **c.to_dict(), "lines": c.lines()}
     coulomb = params.get("c") if isinstance(params.get("c"), dict) else None
     if "v" in c.disagree and coulomb and coulomb.get("determined", True) and coulomb.get("value", 0) > 0:
@@ -258,7 +271,7 @@ def compare_with_identify(summary: dict, joint: str, params: dict, source: str) 
         out["lines"] = out["lines"] + [f"v: {note}"]
     try:
         pv = {n: float(params[n]["value"]) for n in ("J", "I", "k", "b", "v")}
-        g = float((summary.get("gravity") or {}).get("g_Nm_per_rad", 0.0))
+        g = float(implied["value"]) if implied is not None else 0.0         # identify's own gravity
         pred = two_inertia_modes(J=pv["J"], I=pv["I"], k=pv["k"], d=0.0, b=pv["b"], v=pv["v"], g=g)
         by_kind = {kind: f for kind, f, _ in pred}
         out["modes"] = [{"kind": m["kind"], "f_hz_frf": m["f_hz"], "f_hz_std_frf": m.get("f_hz_std"),

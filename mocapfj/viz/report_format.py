@@ -20,7 +20,7 @@ from ..errors import InputError, not_utf8
 __all__ = ["fmt", "pm", "parse_pm", "UNITS", "read_result_json", "read_toml", "read_columns", "field"]
 
 # Units of the identified parameters (docs/identification.md; link side).
-UNITS = {"I": "kg m²", "J": "kg m²", "k": "N m/rad", "k1": "N m/rad", "k3": "N m/rad³", "c": "N m",
+UNITS = {"I": "kg m²", "J": "kg m²", "k": "N m/rad", "g": "N m/rad", "k1": "N m/rad", "k3": "N m/rad³", "c": "N m",
          "v": "N m s/rad", "b": "N m s/rad", "d": "N m s/rad", "mglx": "N m", "mgly": "N m", "tau0": "N m",
          "loop_half_height_Nm": "N m", "gap_rad": "rad", "delay_s": "s", "tau1": "N m",
          "tau2": "N m", "k2": "N m/rad"}

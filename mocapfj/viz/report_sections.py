@@ -23,6 +23,7 @@ __all__ = ["recording_blocks", "calibration_sections", "joint_sections", "identi
 MEANING = {"I": "link inertia", "J": "motor inertia (link side)", "k": "joint stiffness",
            "b": "motor viscous friction", "c": "link Coulomb friction", "v": "link viscous friction",
            "mglx": "gravity torque (sin q term)", "mgly": "gravity torque (cos q term)", "d": "spring damping",
+           "g": "gravity stiffness about the operating point",
            "tau0": "spring torque at zero deflection"}
 
 
@@ -398,15 +399,13 @@ def _frf_section(root: Path, d: dict, path: Path) -> Section:
         blocks.append(Paragraph(f"Fitted model {model['name']}: chi²/dof {fmt(model.get('chi2_red'), 3)} "
                                 f"({fmt(model.get('chi2'), 4)} over {model.get('dof')} degrees of freedom)."))
         grav = d.get("gravity") or {}
-        if grav.get("g_Nm_per_rad"):
-            blocks.append(Paragraph(f"The link's gravity stiffness about its operating point is held at "
+        if "g_Nm_per_rad" in grav and model.get("name") == "two_inertia":
+            how = ("fitted with the rest" if model.get("gravity_fitted")
+                   else f"held: {grav.get('source', 'given')}")
+            blocks.append(Paragraph(f"The link's gravity stiffness about its operating point g = "
                                     f"{pm(grav['g_Nm_per_rad'], grav.get('g_std_Nm_per_rad'))} N m/rad "
-                                    f"({fmt(grav.get('share_of_k_pct'), 3)} % of k; {grav.get('source', '')}); "
-                                    "its SD is counted in the parameters'."))
-        elif model.get("name") == "two_inertia":
-            blocks.append(Paragraph("No gravity stiffness was held: on a joint gravity acts on, the fit reads it "
-                                    "into k and I (pass --gravity-stiffness, or --compare an identification "
-                                    "with its gravity parameters)."))
+                                    f"({fmt(grav.get('share_of_k_pct'), 3)} % of k), {how}: the linear model without "
+                                    "it would read it into k and I."))
         blocks.append(Table(("parameter", "meaning", "value ± SD", "unit"), rows))
     modes = d.get("modes") or []
     if modes:

@@ -48,7 +48,7 @@ def test_closed_loop_csv(record, capsys, tmp_path):
         assert key in f
     assert f["estimator"] == "indirect" and len(f["magnitude"]) == len(f["frequencies_hz"])
     m = s["model"]
-    assert m["name"] == "two_inertia" and set(m["params"]) == {"J", "I", "k", "d", "b", "v"}
+    assert m["name"] == "two_inertia" and set(m["params"]) == {"J", "I", "k", "d", "b", "v", "g"}
     assert abs(m["params"]["k"]["value"] / P["k"] - 1) < 0.03
     truth = two_inertia_modes(**P)
     assert [x["kind"] for x in s["modes"]] == ["antiresonance", "resonance"]
@@ -160,17 +160,17 @@ def test_compare_with_the_time_domain_identification(record, capsys, tmp_path):
     assert code == 2 and "compare" in err and err.count("\n") == 1
 
 
-def test_gravity_stiffness_from_the_identification_or_given(capsys, tmp_path):
-    """A link under gravity about its operating point (g = -5 % of k): with --compare, g comes from
-    identify's mglx, mgly at the record's mean angle and the fit recovers k (within 1 % and 4 SDs,
-    the SD counting g's); --gravity-stiffness 0 leaves it in k (5-9 % off); a non-finite g is one line,
-    exit 2."""
+def test_gravity_stiffness_fitted_compared_or_given(capsys, tmp_path):
+    """A link under gravity about its operating point (g = -5 % of k): fitted by default (k within 1 %
+    and 4 SDs, g within 4 SDs of the truth); with --compare, the g identify's mglx, mgly imply at
+    the record's mean angle is held against it; --gravity-stiffness 0 leaves it in k (5-9 % off);
+    a non-finite g is one line, exit 2."""
     g_true = -0.05 * P["k"]
     ms = design_multisine(FS, 1024, 0.5, 12.0, rms=0.01, seed=7)
     u, y, r = simulate_multisine({**P, "g": g_true}, [ms], 6, kp=300.0, kd=30.0, noise_sd=1.0, seed=8)
     write_csv_columns(tmp_path / "log.csv", {"time": np.arange(u.shape[1]) / FS, "tau": u[0], "qm": y[0], "qref": r[0]})
     q0 = float(np.mean(y[0]))
-    mglx = -g_true / np.cos(q0)                          # g = -mglx cos q0 - mgly sin q0 with mgly = 0
+    mglx = -g_true / np.cos(q0)                          # g = -mglx cos q0 - mgly sin q0 with mgly ~ 0
     truth = {n: (P[n], 0.01 * P[n]) for n in ("J", "I", "k", "b", "v")}
     ident = _identify_json(tmp_path / "id.json", {**truth, "mglx": (mglx, 0.02 * abs(mglx)), "mgly": (1e-6, 0.5)})
     args = (tmp_path / "log.csv", "--input", "tau", "--output", "qm", "--reference", "qref")
@@ -178,13 +178,17 @@ def test_gravity_stiffness_from_the_identification_or_given(capsys, tmp_path):
     assert code == 0, err
     s = json.loads(out)
     grav = s["gravity"]
-    assert grav["g_Nm_per_rad"] == pytest.approx(g_true, rel=1e-6) and "identify's mglx" in grav["source"]
-    assert grav["g_std_Nm_per_rad"] == pytest.approx(0.02 * abs(g_true), rel=1e-3)
+    assert s["model"]["gravity_fitted"] and grav["source"].startswith("fitted")
+    assert abs(grav["g_Nm_per_rad"] - g_true) < 4 * grav["g_std_Nm_per_rad"], grav
+    assert grav["identify"]["value"] == pytest.approx(g_true, rel=1e-6) and "identify's mglx" in grav["identify"]["source"]
     k = s["model"]["params"]["k"]
     assert abs(k["value"] / P["k"] - 1) < 0.01 and abs(k["value"] - P["k"]) < 4 * k["std"], k
-    assert s["model"]["gravity_stiffness"] == grav["g_Nm_per_rad"]
+    st = {c["name"]: c for c in s["comparison"]["params"]}
+    assert st["g"]["status"] == "agree" and st["k"]["status"] == "agree", st
     code, out, err = _run(capsys, *args, "--gravity-stiffness", "0", "--out", tmp_path / "o0", "--json")
-    k0 = json.loads(out)["model"]["params"]["k"]
+    s0 = json.loads(out)
+    k0 = s0["model"]["params"]["k"]
     assert code == 0 and 0.05 < k0["value"] / P["k"] - 1 < 0.09, k0
+    assert not s0["model"]["gravity_fitted"] and s0["gravity"]["source"].startswith("given")
     code, out, err = _run(capsys, *args, "--gravity-stiffness", "nan", "--out", tmp_path / "o1")
     assert code == 2 and "gravity-stiffness" in err and err.count("\n") == 1, err

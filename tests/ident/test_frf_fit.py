@@ -44,25 +44,29 @@ def test_model_with_gravity_matches_the_state_space_plant(output):
     assert two_inertia_modes(**p, g=-40.0)[0][1] == pytest.approx(np.sqrt(760 / 2.0) / (2 * np.pi), rel=1e-9)
 
 
-def test_a_known_gravity_stiffness_removes_the_bias_it_puts_in_k():
+def test_gravity_stiffness_fitted_or_held_and_the_bias_without_it():
     """Closed loop, process noise, a link under gravity (g = -5 % of k, as a joint pulled away
-    from a raised pose): held at its value the fit recovers every parameter within 4 SDs; left
-    out, k and I absorb it: k off by 8 %, several SDs."""
-    g = -0.05 * J1["k"]
-    p = {**J1, "g": g}
+    from a raised pose, and +2 %): fitted with the rest (the default) or held at its value, every
+    parameter and g within 4 SDs; held at 0 (the model without gravity), k and I absorb it: k off
+    by 8 %, several SDs."""
     n, periods, m = 1024, 4, 2
-    ms = design_multisine(FS, n, 0.5, 12.0, rms=0.01, seed=21)
-    u, y, r = simulate_multisine(p, multisine_realisations(ms, m, seed=121), periods, kp=300.0, kd=30.0,
-                                 noise_sd=1.0, seed=21)
-    F = estimate_frf(u, y, FS, n, r=r)
-    fit = fit_two_inertia(F, gravity_stiffness=g)
-    for name in TWO_INERTIA_PARAMS:
-        q = fit.params[name]
-        assert abs(q.value - J1[name]) < 4 * q.std, (name, q, J1[name])
-    assert fit.gravity_stiffness == g and fit.to_dict()["gravity_stiffness"] == g
-    without = fit_two_inertia(F)
-    k0 = without.params["k"]
-    assert abs(k0.value - J1["k"]) > 3 * k0.std and abs(k0.value / J1["k"] - 1) > 0.05, k0   # measured +8.3 %, 4.3 SD
+    for share, seed in ((-0.05, 21), (0.02, 22)):
+        g = share * J1["k"]
+        ms = design_multisine(FS, n, 0.5, 12.0, rms=0.01, seed=seed)
+        u, y, r = simulate_multisine({**J1, "g": g}, multisine_realisations(ms, m, seed=100 + seed), periods,
+                                     kp=300.0, kd=30.0, noise_sd=1.0, seed=seed)
+        F = estimate_frf(u, y, FS, n, r=r)
+        for fit in (fit_two_inertia(F), fit_two_inertia(F, gravity_stiffness=g)):
+            for name in TWO_INERTIA_PARAMS:
+                q = fit.params[name]
+                assert abs(q.value - J1[name]) < 4 * q.std, (name, q, J1[name])
+            assert fit.to_dict()["gravity_stiffness"] == fit.gravity_stiffness
+        free = fit_two_inertia(F)
+        assert free.gravity_fitted and abs(free.gravity_stiffness - g) < 4 * free.gravity_stiffness_std
+        assert free.params["g"].std == free.gravity_stiffness_std > 0
+        if share < 0:
+            k0 = fit_two_inertia(F, gravity_stiffness=0.0).params["k"]
+            assert abs(k0.value - J1["k"]) > 3 * k0.std and abs(k0.value / J1["k"] - 1) > 0.05, k0   # +8.3 %, 4.3 SD
     with pytest.raises(InputError, match="finite gravity stiffness"):
         fit_two_inertia(F, gravity_stiffness=float("nan"))
 
@@ -100,7 +104,11 @@ def test_closed_loop_fit_recovers_the_joint(p, f_max, kp, kd):
             assert abs(m.f_hz - f_true) < 4 * m.f_hz_std and abs(m.zeta - z_true) < 4 * m.zeta_std, (m, f_true, z_true)
         assert 0.3 < fit.chi2_red < 3.0
         d = fit.to_dict()
-        assert d["name"] == "two_inertia" and set(d["params"]) == set(TWO_INERTIA_PARAMS)
+        assert d["name"] == "two_inertia" and set(d["params"]) == set(TWO_INERTIA_PARAMS) | {"g"}
+        # none in the plant: the fitted g within 4 SDs or below 1 % of k (its z RMS over 12 seeds is 0.9-1.0 on
+        # the ASSIST joints; 1.6 on the stiff one, up to 5 SDs, where the closed loop's low lines
+        # carry little of it: benchmarks/bench_frf.py)
+        assert abs(fit.gravity_stiffness) < max(4 * fit.gravity_stiffness_std, 0.01 * p["k"])
 
 
 def test_held_parameters_and_link_output():
