@@ -115,7 +115,8 @@ class FRFFit:
     def to_dict(self) -> dict:
         return {"name": self.model, "output": self.output, "gravity_stiffness": self.gravity_stiffness,
                 "gravity_stiffness_std": self.gravity_stiffness_std, "gravity_fitted": self.gravity_fitted,
-                "params": {n: {"value": p.value, "std": p.std, "rel_std_pct": p.rel_std_pct}
+                "params": {n: {"value": p.value, "std": p.std, "rel_std_pct": p.rel_std_pct,
+                               **({} if p.determined else {"determined": False, "reason": p.reason})}
                            for n, p in self.params.items()},
                 "chi2": self.chi2, "dof": self.dof, "chi2_red": self.chi2_red,
                 "modes": [m.to_dict() for m in self.modes]}
@@ -160,23 +161,25 @@ def _fz(p):
     return float(abs(p) / (2 * np.pi)), float(-p.real / abs(p))
 
 
-def _initial(frf: FRF, output: str):
-    """Starting points from the FRF's shape: rigid-body inertia M and viscosity B from the lowest
-    lines, the mode frequencies from the dip and the peak of |G (M s^2 + B s)| (flat for a rigid
-    body), then M and B again below the first mode."""
+def _initial(frf: FRF, output: str, g: float | None = 0.0):
+    """Starting points (J, I, k, d, b, v, g) from the FRF's shape: rigid-body inertia M, viscosity
+    B and (g None: fitted) the gravity stiffness c from the lowest lines, the mode frequencies from
+    the dip and the peak of |G (M s^2 + B s + c)| (flat for a rigid body), then M, B, c again below
+    the first mode. A held g is subtracted (c = g)."""
     f, G = frf.f_hz, frf.G
     w = 2 * np.pi * f
 
     def rigid(low):
-        """M, B of 1/G = M s^2 + B s on the lines `low` (linear least squares)."""
-        Z = 1.0 / G[low]
-        A = np.column_stack([-w[low] ** 2, 1j * w[low]])
+        """M, B, c of 1/G = M s^2 + B s + c on the lines `low` (linear least squares; c = g when held)."""
+        Z = 1.0 / G[low] - (0.0 if g is None else g)
+        cols = [-w[low] ** 2, 1j * w[low]] + ([np.ones(int(low.sum()))] if g is None else [])
+        A = np.column_stack(cols).astype(complex)
         mb = np.linalg.lstsq(np.vstack([A.real, A.imag]), np.concatenate([Z.real, Z.imag]), rcond=None)[0]
         M = abs(mb[0]) if mb[0] != 0 else 1.0 / (np.abs(G[low][0]) * w[low][0] ** 2)
-        return M, max(mb[1], 1e-6 * M * w[0])
+        return M, max(mb[1], 1e-6 * M * w[0]), (float(mb[2]) if g is None else g)
 
-    M, B = rigid(np.arange(f.size) < min(3, f.size))
-    a = np.abs(G * (-M * w ** 2 + 1j * B * w))       # ~1 below the modes: the rigid body divided out
+    M, B, c = rigid(np.arange(f.size) < min(3, f.size))
+    a = np.abs(G * (-M * w ** 2 + 1j * B * w + c))   # ~1 below the modes: the rigid body divided out
     ia = int(np.argmin(a)) if output == "motor" else 0
     ir = ia + int(np.argmax(a[ia:]))
     if output == "motor" and (ia in (0, f.size - 1) or ir == ia):
@@ -186,7 +189,7 @@ def _initial(frf: FRF, output: str):
     f_first = f[ia] if output == "motor" else f[ir]
     low = f < 0.6 * f_first
     if low.sum() >= 2:
-        M, B = rigid(low)
+        M, B, c = rigid(low)
     starts = []
     if output == "motor":
         wa, wr = w[ia], w[ir]
@@ -194,15 +197,18 @@ def _initial(frf: FRF, output: str):
         J = M / (1 + rho)
         I = M - J
         k = I * wa ** 2
+        k = I * wa ** 2 - c                        # omega_a^2 = (k + g) / I
+        if not k > 0:
+            k = I * wa ** 2
         for z in (0.005, 0.03, 0.1):
-            starts.append((J, I, k, 2 * z * wa * I, B / 2, B / 2))
+            starts.append((J, I, k, 2 * z * wa * I, B / 2, B / 2, c))
     else:
         wr = w[ir]
         for rho in (0.3, 1.0, 3.0):
             J = M / (1 + rho)
             I = M - J
             k = wr ** 2 / (1 / I + 1 / J)
-            starts.append((J, I, k, 0.03 * 2 * np.sqrt(k * I * J / (I + J)), B / 2, B / 2))
+            starts.append((J, I, k, 0.03 * 2 * np.sqrt(k * I * J / (I + J)), B / 2, B / 2, c))
     return starts
 
 
@@ -276,7 +282,7 @@ def fit_two_inertia(frf: FRF, *, output: str = "motor", fixed: dict | None = Non
     sd = np.sqrt(np.maximum(frf.var[sel], (1e-10 * np.abs(frf.G[sel])) ** 2 + 1e-300) / 2.0)   # noise-free: 1e-10
     sub = FRF(f, G, frf.var[sel], None, frf.coherence[sel], frf.lines[sel], frf.estimator, frf.n_periods,
               frf.n_realisations, frf.fs_hz, frf.n_samples, frf.closed_loop, frf.distortion)
-    starts = [p0 + (g,) for p0 in _initial(sub, output)]
+    starts = _initial(sub, output, None if fit_g else g)
     log = np.array([True, True, True, False, False, False, False])
 
     def full(x):
@@ -313,11 +319,15 @@ def fit_two_inertia(frf: FRF, *, output: str = "motor", fixed: dict | None = Non
             return None
 
     if fit_g:
-        # from the fit with g held at 0, then g free from there and from +-2 % of its k
-        held = fit_two_inertia(frf, output=output, fixed={n_: v_ for n_, v_ in fixed.items() if n_ != "g"},
-                               f_band_hz=f_band_hz, gravity_stiffness=0.0)
-        v0 = [held.value(n_) for n_ in TWO_INERTIA_PARAMS]
-        starts = [tuple(v0) + (s * v0[2],) for s in (0.0, -0.02, 0.02)] + starts
+        # also from the fit with g held at 0 (when that model fits at all: a strong gravity hides
+        # its dip and peak), g free from there and from +-2 % of its k
+        try:
+            held = fit_two_inertia(frf, output=output, fixed={n_: v_ for n_, v_ in fixed.items() if n_ != "g"},
+                                   f_band_hz=f_band_hz, gravity_stiffness=0.0)
+            v0 = [held.value(n_) for n_ in TWO_INERTIA_PARAMS]
+            starts = [tuple(v0) + (s * v0[2],) for s in (0.0, -0.02, 0.02)] + starts
+        except InputError:
+            pass
     for p0 in starts:
         sol = solve(np.asarray(p0, dtype=np.float64))
         if sol is not None and (best is None or sol.cost < best.cost):
@@ -337,7 +347,17 @@ def fit_two_inertia(frf: FRF, *, output: str = "motor", fixed: dict | None = Non
     Jn = np.diag(np.where(log, val, 1.0))[:, free]          # d natural / d x
     cov = Jn @ cov_x @ Jn.T
     std = np.sqrt(np.maximum(np.diag(cov), 0.0))
-    params = {n_: Parameter(n_, float(val[i]), float(std[i])) for i, n_ in enumerate(_NAMES)}
+    D_fit = _polys(*val[:6], val[6])[2]
+    if not (np.all(np.isfinite(val)) and np.all(np.isfinite(D_fit)) and D_fit[0] > 0
+            and np.all(np.isfinite(D_fit[1:] / D_fit[0])) and min(val[0], val[1]) > 1e-9 * (val[0] + val[1])):
+        raise InputError(None, "frf", "an FRF the two-inertia model can be fitted to",
+                         "a fit that left the finite numbers or drove an inertia to zero",
+                         hint="check the band covers both modes")
+    # a singular curvature (NaN SDs): the fit does not determine its parameters; said, not hidden
+    params = {n_: Parameter(n_, float(val[i]), float(std[i]), determined=bool(np.isfinite(std[i])),
+                            reason=None if np.isfinite(std[i]) else
+                            "the fit's curvature is singular: the FRF does not determine it")
+              for i, n_ in enumerate(_NAMES)}
     g = float(val[6])
     if not val[2] + g > 0:
         raise InputError(None, "gravity_stiffness", f"a gravity stiffness the fitted spring outweighs (k + g > 0, "
