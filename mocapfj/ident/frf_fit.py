@@ -282,7 +282,13 @@ def fit_two_inertia(frf: FRF, *, output: str = "motor", fixed: dict | None = Non
     sd = np.sqrt(np.maximum(frf.var[sel], (1e-10 * np.abs(frf.G[sel])) ** 2 + 1e-300) / 2.0)   # noise-free: 1e-10
     sub = FRF(f, G, frf.var[sel], None, frf.coherence[sel], frf.lines[sel], frf.estimator, frf.n_periods,
               frf.n_realisations, frf.fs_hz, frf.n_samples, frf.closed_loop, frf.distortion)
-    starts = _initial(sub, output, None if fit_g else g)
+    shape_error = None
+    try:
+        starts = _initial(sub, output, None if fit_g else g)
+    except InputError as e:
+        if not fit_g:
+            raise
+        starts, shape_error = [], e       # the fit without g may still give a start (below)
     log = np.array([True, True, True, False, False, False, False])
 
     def full(x):
@@ -327,7 +333,8 @@ def fit_two_inertia(frf: FRF, *, output: str = "motor", fixed: dict | None = Non
             v0 = [held.value(n_) for n_ in TWO_INERTIA_PARAMS]
             starts = [tuple(v0) + (s * v0[2],) for s in (0.0, -0.02, 0.02)] + starts
         except InputError:
-            pass
+            if shape_error is not None:
+                raise shape_error from None
     for p0 in starts:
         sol = solve(np.asarray(p0, dtype=np.float64))
         if sol is not None and (best is None or sol.cost < best.cost):
