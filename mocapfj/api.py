@@ -189,7 +189,7 @@ def identify(recordings: RecordingLike | Sequence[RecordingLike], *, method: str
     return Identification(recordings=names, joints=tuple(summarize_trials(trials)), nlink=tuple(nlink))
 
 
-def _models_of(model, names: Sequence[str]) -> dict:
+def joint_models(model, names: Sequence[str]) -> dict:
     """Joint models by name from a model file path, an Identification, or a {name: JointModel}."""
     from .discover import read_model_file
     from .ident.result import Identification
@@ -228,7 +228,7 @@ def discover(rec: RecordingLike, *, model=None, validation: RecordingLike | None
         gear = {j.name: j.gear_ratio for j in rec.joints}
         models = {n: identify_signals(s, gear_ratio=gear[n], spring_models=("linear",)).model for n, s in sig.items()}
     else:
-        models = _models_of(model, list(sig))
+        models = joint_models(model, list(sig))
     val = signals(val_rec, validation_calibration) if val_rec is not None else None
     fs = next(iter(sig.values())).fs_hz
     return _discover(sig, models, fs_hz=fs, validation=val, **kw)

@@ -955,11 +955,34 @@ def _run(args) -> int:
     return int(args.func(args))
 
 
+def _keep_freed_memory() -> None:
+    """glibc only: keep freed blocks up to 32 MB in the process for reuse, instead of returning
+    each to the kernel. Output error allocates and frees arrays of a few MB (a minute at 1 kHz,
+    eight sensitivities) thousands of times; with glibc's default, every one is mapped afresh and
+    page-faulted in, which made a discovery's re-identification 20-30 % slower (measured: 12.2 ->
+    9.4 s). A command runs once and exits, so the memory kept is returned at exit."""
+    if not sys.platform.startswith("linux"):
+        return
+    import ctypes
+
+    try:
+        libc = ctypes.CDLL(None)
+        mallopt = libc.mallopt
+    except (OSError, AttributeError):               # not glibc (musl has no mallopt): as it is
+        return
+    M_TRIM_THRESHOLD, M_TOP_PAD, M_MMAP_THRESHOLD = -1, -2, -3
+    mallopt(M_MMAP_THRESHOLD, 32 << 20)
+    mallopt(M_TRIM_THRESHOLD, 256 << 20)
+    mallopt(M_TOP_PAD, 64 << 20)
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     import signal
 
     parser = build_parser()
     args = parser.parse_args(argv)
+    if argv is None:                         # a command of its own process, not a call from Python
+        _keep_freed_memory()
     try:
         previous = signal.signal(signal.SIGTERM, _terminate)
     except ValueError:                       # not the main thread (an embedding application)

@@ -44,7 +44,7 @@ from .reident import REID_EFFECTS
 from .tournament import Judge, pool, score_dict
 from .residuals import Families, families
 
-__all__ = ["Discovery", "discover", "locate", "effective_n", "GAP_POINTS", "GAIN_MIN_POINTS"]
+__all__ = ["Discovery", "discover", "reidentification_ahead", "locate", "effective_n", "GAP_POINTS", "GAIN_MIN_POINTS"]
 
 GAIN_MIN_POINTS = 0.0
 """An effect must raise the held-out output-error fit (the validation recording's, else the trial's)
@@ -383,7 +383,8 @@ def _steps(found: list, jn: str) -> tuple[list, list]:
     return models, index
 
 
-def _reidentification(jn, s, nominal, current, found, rejected, held_out, on_valid, holdout, others_trial) -> dict:
+def _reidentification(jn, s, nominal, current, found, rejected, held_out, on_valid, holdout, others_trial,
+                      ahead=None) -> dict:
     """The re-identification of joint jn (:mod:`.reident`) judged on the held-out evidence (the
     validation recording, else the trial's last `holdout` part, the identification then made on
     the rest); updates `current`, `found`, `rejected` and the held-out chain. Returns the report
@@ -399,13 +400,13 @@ def _reidentification(jn, s, nominal, current, found, rejected, held_out, on_val
       the nominal model's error; a tie goes to the effect, which moves fewer parameters); a nominal model with no effect found is replaced by the re-identified one when that
       fits better by GAIN_SDS x its SD (the nominal parameters were off).
     """
-    from .reident import segment, reidentify
+    from .reident import ReidentificationError, segment, reidentify
 
     if on_valid:
         data, others, where, chain = held_out(jn)
         train = s
     else:
-        data, train, where = segment(s, 1.0 - holdout, 1.0), segment(s, 0.0, 1.0 - holdout), "trial's held-out part"
+        data, train, where = segment(s, 1.0 - holdout, 1.0), _train(s, False, holdout), "trial's held-out part"
         m = (s.t >= data.t[0]) & (s.t <= data.t[-1])
         others = {k: v[m] for k, v in others_trial.items()}
         chain = [_nominal_sim(nominal, data, others)]
@@ -417,9 +418,9 @@ def _reidentification(jn, s, nominal, current, found, rejected, held_out, on_val
         return simulate_joint(model, data.t, data.q, data.q_m, data.u, others, band_hz=band)
 
     try:
-        R = reidentify(train, nominal)
+        R = reidentify(train, nominal) if ahead is None else ahead.get(jn)
         oe_base = sim(R.base)
-    except (InputError, RuntimeError, FloatingPointError, np.linalg.LinAlgError) as e:
+    except (InputError, ReidentificationError, RuntimeError, FloatingPointError, np.linalg.LinAlgError) as e:
         return {"error": f"not re-identified: {e}"}
     oe_nom, oe_cur = chain[0], chain[-1]
     report = {"evidence": where, "parameters": R.parameters, "fit_nominal": oe_nom.fit, "fit_found": oe_cur.fit,
@@ -518,9 +519,18 @@ def _reidentification(jn, s, nominal, current, found, rejected, held_out, on_val
     return report
 
 
+def _train(s: JointSignals, on_valid: bool, holdout: float) -> JointSignals:
+    """What a joint is re-identified on: the whole trial when a validation recording holds the
+    evidence out, else the trial's first 1 - holdout."""
+    from .reident import segment
+
+    return s if on_valid else segment(s, 0.0, 1.0 - holdout)
+
+
 def discover(signals: dict, models: dict, *, fs_hz: float, validation: dict | None = None, holdout: float = 0.3,
              alpha: float = 1e-10, screen: float = SCREEN, min_explained: float = 0.003, max_effects: int = 3,
-             effects=EFFECTS, simulate: bool = True, reidentify: bool = True) -> Discovery:
+             effects=EFFECTS, simulate: bool = True, reidentify: bool = True,
+             parallel: bool = True, ahead=None) -> Discovery:
     """Discover what `models` miss in the recording `signals` (joint -> JointSignals).
 
     alpha : significance after the Bonferroni correction over the effects and joints tried.
@@ -535,6 +545,11 @@ def discover(signals: dict, models: dict, *, fs_hz: float, validation: dict | No
     simulate : run the output-error simulations (fit before / after); False for the search alone.
     reidentify : re-identify each joint with its nominal parameters free (:mod:`.reident`): the
         effects output error fits itself, and the found ones checked against it (needs simulate).
+    parallel : run the re-identification in a worker process beside the search (Linux, two
+        cores or more; :class:`.reident.Ahead`): the same result, sooner.
+    ahead : the re-identifications started already (:func:`reidentification_ahead` with these
+        signals, models, validation joints and holdout), e.g. while the validation recording's
+        joints were solved; discover() stops its worker when it ends. Default: started here.
     """
     unknown = [e for e in effects if e not in FITTERS]
     if unknown:
@@ -542,6 +557,62 @@ def discover(signals: dict, models: dict, *, fs_hz: float, validation: dict | No
     missing = [n for n in signals if n not in models]
     if missing:
         raise InputError(None, "model", f"a model for every joint of the recording {list(signals)}", f"none for {missing}")
+    from threadpoolctl import threadpool_limits
+
+    key = _ahead_key(signals, models, validation, holdout)
+    if ahead is not None and (getattr(ahead, "key", None) != key or not (simulate and reidentify)):
+        ahead.close()                                    # made for other signals or settings: not used
+        ahead = None
+    try:
+        # one BLAS thread: the matrices are tall and thin (a few thousand rows, ten columns), where
+        # more threads gain nothing and spin on the core the re-identification's worker needs
+        with threadpool_limits(1, user_api="blas"):
+            if ahead is None and simulate and reidentify:
+                ahead = reidentification_ahead(signals, models, validation, holdout, parallel)
+            return _discover(signals, models, ahead, fs_hz=fs_hz, validation=validation, holdout=holdout,
+                             alpha=alpha, screen=screen, min_explained=min_explained, max_effects=max_effects,
+                             effects=effects, simulate=simulate, reidentify=reidentify)
+    finally:
+        if ahead is not None:
+            ahead.close()
+
+
+def _ahead_key(signals: dict, models: dict, validation, holdout: float) -> bytes:
+    """A digest of what the re-identifications depend on: each joint's signals (content) and
+    nominal model, which joints have a validation recording, the holdout."""
+    from ..ident.output_error import content_digest
+
+    names = tuple(signals)
+    parts = [names, tuple(n for n in names if validation is not None and n in validation), float(holdout)]
+    for n in names:
+        s = signals[n]
+        parts += [s.t, s.q, s.q_m, s.u, s.fs_hz, s.filled, s.t_c, s.q_m_c, s.u_c, s.fs_c_hz, repr(models[n])]
+    return content_digest(*parts)
+
+
+def reidentification_ahead(signals: dict, models: dict, validation=None, holdout: float = 0.3, parallel: bool = True):
+    """Start the re-identification of each joint of `signals` (its nominal model in `models`) in
+    a worker process (:class:`.reident.Ahead`), before :func:`discover` needs it: it depends only
+    on the trial, the nominal models and which joints `validation` (a dict or set of joint names,
+    or None) holds out. Pass the same objects to :func:`discover` with ``ahead=``."""
+    from threadpoolctl import threadpool_limits
+
+    from .reident import Ahead
+
+    missing = [n for n in signals if n not in models]
+    if missing:
+        raise InputError(None, "model", f"a model for every joint of the recording {list(signals)}", f"none for {missing}")
+    with threadpool_limits(1, user_api="blas"):         # the worker inherits it
+        ahead = Ahead({jn: (_train(signals[jn], validation is not None and jn in validation, holdout), models[jn])
+                       for jn in signals}, parallel=parallel)
+    ahead.key = _ahead_key(signals, models, validation, holdout)
+    return ahead
+
+
+def _discover(signals: dict, models: dict, ahead, *, fs_hz: float, validation: dict | None, holdout: float,
+              alpha: float, screen: float, min_explained: float, max_effects: int, effects, simulate: bool,
+              reidentify: bool) -> Discovery:
+    """discover()'s work, with the re-identifications from `ahead` (None: none are made)."""
     nominal = {n: models[n] for n in signals}
     current = dict(nominal)
     names = list(signals)
@@ -659,7 +730,7 @@ def discover(signals: dict, models: dict, *, fs_hz: float, validation: dict | No
         for jn in names:
             reidentified[jn] = _reidentification(jn, signals[jn], nominal[jn], current, found, rejected, held_out,
                                                  validation is not None and jn in validation, holdout,
-                                                 {k: v for k, v in qdd.items() if k != jn})
+                                                 {k: v for k, v in qdd.items() if k != jn}, ahead)
         fams, qdd = _families_all(current, signals, fs_hz, ctx)
     effects_out, fit_before, fit_after, fits, residuals = [], {}, {}, {}, {}
     val = None

@@ -15,6 +15,9 @@ the effect is judged against the same re-identification without it (`base`).
 
 from __future__ import annotations
 
+import multiprocessing
+import os
+import sys
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -134,3 +137,85 @@ def reidentify(s: JointSignals, nominal: JointModel) -> Reidentified:
                      "change_pct": float(100.0 * (p.value - nom) / nom) if nom else None,
                      "sds": float((p.value - nom) / sd) if sd > 0 and np.isfinite(sd) else None}
     return Reidentified(model=model, base=base, effects=effects, parameters=params, identification=full)
+
+
+_CAUGHT = (InputError, RuntimeError, FloatingPointError, np.linalg.LinAlgError)
+
+
+class ReidentificationError(RuntimeError):
+    """A re-identification in the worker failed the way :func:`reidentify` can (bad or
+    non-physical signals): its one-line message, raised again in the discovery's process."""
+
+
+def _ahead_worker(jobs: dict, conn) -> None:
+    out = {}
+    try:
+        for jn, (s, nominal) in jobs.items():
+            try:
+                out[jn] = ("ok", reidentify(s, nominal))
+            except _CAUGHT as e:
+                out[jn] = ("caught", str(e))
+            except Exception:                           # a fault: the discovery's process repeats it
+                out[jn] = ("other", None)
+        conn.send(out)
+    except (KeyboardInterrupt, BrokenPipeError, EOFError):
+        pass
+    finally:
+        conn.close()
+        os._exit(0)                                     # no atexit handlers, no buffered output of the parent's
+
+
+class Ahead:
+    """The re-identifications of a discovery's joints (:func:`reidentify` of each (signals, nominal)
+    of `jobs`), started at once in a forked worker process: they depend only on the trial and the
+    nominal model, not on what the search finds, so the search (one process, one core) and the
+    re-identification (the longest stage: some twenty output-error fits) run on two cores side by
+    side. :meth:`get` returns the same result :func:`reidentify` would return in this process, or
+    raises what it would raise (a fault in the worker, or a worker that died, is repeated here).
+    Where fork is unavailable (not Linux) or `parallel` is False, everything runs in :meth:`get`."""
+
+    def __init__(self, jobs: dict, parallel: bool = True):
+        self._jobs = dict(jobs)
+        self._results = None
+        self._proc = self._conn = None
+        if (parallel and self._jobs and sys.platform.startswith("linux")
+                and "fork" in multiprocessing.get_all_start_methods() and (os.cpu_count() or 1) > 1):
+            ctx = multiprocessing.get_context("fork")
+            recv, send = ctx.Pipe(duplex=False)
+            try:
+                proc = ctx.Process(target=_ahead_worker, args=(self._jobs, send), daemon=True)
+                proc.start()
+            except OSError:                              # no process to spare: in this one
+                recv.close()
+            else:
+                self._proc, self._conn = proc, recv
+            send.close()
+
+    def _collect(self) -> dict:
+        if self._results is None:
+            self._results = {}
+            if self._conn is not None:
+                try:
+                    self._results = self._conn.recv()
+                except (EOFError, OSError):
+                    self._results = {}                   # the worker died: each joint again here
+                finally:
+                    self._conn.close()
+                    self._proc.join()
+        return self._results
+
+    def get(self, jn: str) -> Reidentified:
+        kind, value = self._collect().get(jn, ("other", None))
+        if kind == "ok":
+            return value
+        if kind == "caught":
+            raise ReidentificationError(value)
+        return reidentify(*self._jobs[jn])
+
+    def close(self) -> None:
+        """Stop the worker if it still runs (the discovery ended early, or failed)."""
+        if self._proc is not None and self._results is None:
+            self._proc.kill()
+            self._proc.join()
+            self._conn.close()
+            self._results = {}

@@ -135,8 +135,9 @@ class _FitMemo:
 _LINEAR_FITS = _FitMemo()
 
 
-def _linear_fit_key(*parts) -> bytes:
-    """A digest of arrays, tuples and numbers (the arguments steps 1-4 depend on)."""
+def content_digest(*parts) -> bytes:
+    """A digest of arrays, tuples, numbers and strings: the memo of steps 1-4 below is keyed by the
+    arguments they depend on; discovery keys its re-identification started ahead the same way."""
     import hashlib
 
     h = hashlib.blake2b(digest_size=20)
@@ -1035,7 +1036,7 @@ def identify_output_error(t, q, q_m, u, *, fs_hz: float, measured=None, controll
     # steps 1-4, the linear-spring fit, depend only on the signals and these settings: a second
     # identification of the same signals (discovery's effect-free re-identification after the
     # one with every spring model) takes them from the first (_LINEAR_FITS), not again
-    key = _linear_fit_key(t, q, q_m, u, measured, controller, band_hz, trim_s, friction_scales, x0, max_nfev,
+    key = content_digest(t, q, q_m, u, measured, controller, band_hz, trim_s, friction_scales, x0, max_nfev,
                           link_band_fraction, clock_offset_s)
     hit = _LINEAR_FITS.get(key)
     if hit is not None:

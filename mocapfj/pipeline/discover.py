@@ -20,6 +20,15 @@ def run_discover(recording, out: str | Path, model: str | Path | None = None, va
     OUT/discovery.json, the augmented model OUT/model.toml and the before/after residuals
     OUT/residuals.csv (t, and per joint r_delta_before/after rad, r_u_before/after N m).
     """
+    from threadpoolctl import threadpool_limits
+
+    # one BLAS thread throughout: the re-identification's worker runs on the other core, and idle
+    # BLAS threads spin on it (mocapfj.discover.discover)
+    with threadpool_limits(1, user_api="blas"):
+        return _run_discover(recording, out, model, validation)
+
+
+def _run_discover(recording, out, model, validation) -> dict:
     from ..api import discover
     from ..discover import read_model_file
     from ..joints.stage import calibrate_joints
@@ -30,12 +39,27 @@ def run_discover(recording, out: str | Path, model: str | Path | None = None, va
         read_model_file(model)
     rec = load_recording(recording)
     cal = calibrate_joints(rec)
-    write_joints(cal, out / "joints")
-    val_cal = None
-    if val_rec is not None:
-        val_cal = calibrate_joints(val_rec)
-        write_joints(val_cal, out / "validation_joints")
-    d = discover(rec, model=model, validation=val_rec, calibration=cal, validation_calibration=val_cal)
+    ahead = None
+    if model is not None:
+        # the re-identification needs only this recording and the model: started in a worker
+        # now, it runs beside the validation recording's joints and the search (same result)
+        from ..api import joint_models, signals
+        from ..discover.engine import reidentification_ahead
+
+        sig = signals(rec, cal)
+        ahead = reidentification_ahead(sig, joint_models(model, list(sig)),
+                                       {j.name for j in val_rec.joints} if val_rec is not None else None)
+    try:
+        write_joints(cal, out / "joints")
+        val_cal = None
+        if val_rec is not None:
+            val_cal = calibrate_joints(val_rec)
+            write_joints(val_cal, out / "validation_joints")
+        d = discover(rec, model=model, validation=val_rec, calibration=cal, validation_calibration=val_cal,
+                     **({"ahead": ahead} if ahead is not None else {}))
+    finally:
+        if ahead is not None:
+            ahead.close()
     d = replace(d, recording=str(recording), model_source=str(model) if model is not None else "identified")
     return write_discovery(d, out)
 

@@ -1,0 +1,66 @@
+"""The re-identification run ahead in a worker process (mocapfj.discover.reident.Ahead): the same
+result as in the discovery's own process, and the same errors, whether the worker finishes, fails
+or dies."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from threadpoolctl import threadpool_limits
+
+from mocapfj.discover.reident import Ahead, ReidentificationError, reidentify, segment
+from mocapfj.errors import InputError
+
+
+@pytest.fixture(scope="module")
+def half_trial(pa10_hinge):
+    """The PA-10 hinge's first 12 s (the shortest the re-identification takes: its trims and 5 s)."""
+    _, sig, nominal = pa10_hinge
+    s = sig["j1"]
+    return segment(s, 0.0, 12.0 / float(s.t[-1] - s.t[0])), nominal
+
+
+def _params(R):
+    return {n: (p["value"], p["std"]) for n, p in R.parameters.items()}
+
+
+def test_the_worker_returns_what_this_process_computes(half_trial):
+    s, nominal = half_trial
+    with threadpool_limits(1, user_api="blas"):
+        here = reidentify(s, nominal)
+        ahead = Ahead({"j1": (s, nominal)})
+        assert ahead._proc is not None                  # Linux, 2 cores: it did run in a worker
+        there = ahead.get("j1")
+    assert _params(there) == _params(here)
+    assert there.model == here.model and there.base == here.base
+    assert [e["name"] for e in there.effects] == [e["name"] for e in here.effects]
+    # the truth within 4 SDs of the worker's re-identification (it is an identification, not a copy)
+    k = there.parameters["k"]
+    assert abs(k["value"] - nominal.spring.k) < 4 * k["std"]
+
+
+def test_a_worker_that_dies_is_replaced_by_this_process(half_trial):
+    s, nominal = half_trial
+    ahead = Ahead({"j1": (s, nominal)})
+    ahead._proc.kill()
+    R = ahead.get("j1")                                  # computed here instead, not lost
+    assert abs(R.parameters["k"]["value"] / nominal.spring.k - 1) < 0.05
+    ahead.close()
+
+
+def test_the_workers_error_is_the_same_one_line(half_trial):
+    s, nominal = half_trial
+    short = segment(s, 0.0, 0.2)                         # 2.4 s: too short for output error
+    with pytest.raises(InputError) as here:
+        reidentify(short, nominal)
+    ahead = Ahead({"j1": (short, nominal)})
+    with pytest.raises(ReidentificationError) as there:
+        ahead.get("j1")
+    assert str(there.value) == str(here.value) and "\n" not in str(there.value)
+
+
+def test_closed_before_use_stops_the_worker(half_trial):
+    s, nominal = half_trial
+    ahead = Ahead({"j1": (s, nominal)})
+    ahead.close()
+    assert not ahead._proc.is_alive()
