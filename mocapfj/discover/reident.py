@@ -109,9 +109,10 @@ def _effects_of(ident, s: JointSignals) -> list[dict]:
     return out
 
 
-def reidentify(s: JointSignals, nominal: JointModel) -> Reidentified:
+def reidentify(s: JointSignals, nominal: JointModel, _plain=None) -> Reidentified:
     """Re-identify a joint with its nominal parameters free (module docstring). Raises InputError
-    when the signals cannot be identified (too short, non-physical)."""
+    when the signals cannot be identified (too short, non-physical). `_plain`: a callable giving
+    the identification with a linear spring only (computed elsewhere; :func:`_reidentify_split`)."""
     from ..ident.joint import identify_signals
 
     if nominal.robot is not None:
@@ -122,7 +123,8 @@ def reidentify(s: JointSignals, nominal: JointModel) -> Reidentified:
     effects = _effects_of(full, s)
     delay = next((e["parameters"]["delay_s"] for e in effects if e["name"] == "time_delay"), 0.0)
     model = _keep_terms(full.model, nominal).with_(delay_s=float(delay))
-    plain = full if not effects else identify_signals(s, gear_ratio=nominal.gear_ratio, spring_models=("linear",))
+    plain = full if not effects else (_plain() if _plain is not None else
+                                      identify_signals(s, gear_ratio=nominal.gear_ratio, spring_models=("linear",)))
     base = _keep_terms(plain.model, nominal)
     params = {}
     for n in _NOMINAL:
@@ -147,12 +149,76 @@ class ReidentificationError(RuntimeError):
     non-physical signals): its one-line message, raised again in the discovery's process."""
 
 
+def _reidentify_split(s: JointSignals, nominal: JointModel, close_in_spare=()) -> Reidentified:
+    """:func:`reidentify` on two cores: the identification with a linear spring only (needed
+    when the full one finds an effect) is made in a second forked process as soon as the linear
+    fit both share is done (its memo, mocapfj.ident.output_error.LINEAR_FITS, inherited), while
+    this one goes on with the spring models and the clock. The same result; the spare process's
+    failure or death means the plain identification is made here. `close_in_spare`: connections
+    the spare process must not hold open (the worker's to the discovery)."""
+    from ..ident.joint import identify_signals
+    from ..ident.output_error import LINEAR_FITS
+
+    def plain_here():
+        return identify_signals(s, gear_ratio=nominal.gear_ratio, spring_models=("linear",))
+
+    spare = {}
+
+    def start(key):
+        if spare:
+            return
+        recv, send = multiprocessing.Pipe(duplex=False)
+        try:
+            pid = os.fork()
+        except OSError:
+            recv.close()
+            send.close()
+            spare["pid"] = None
+            return
+        if pid == 0:                                    # the spare process
+            try:
+                recv.close()                            # a reader gone means a broken pipe, not a hang
+                for c in close_in_spare:
+                    c.close()
+                LINEAR_FITS.listeners.clear()
+                send.send(("ok", plain_here()))
+            except BaseException:                       # noqa: BLE001 - repeated by the worker, which reports it
+                pass
+            finally:
+                os._exit(0)
+        send.close()
+        spare.update(pid=pid, conn=recv)
+
+    def plain():
+        if spare.get("pid"):
+            try:
+                kind, value = spare["conn"].recv()
+                if kind == "ok":
+                    return value
+            except (EOFError, OSError):
+                pass
+        return plain_here()
+
+    LINEAR_FITS.listeners.append(start)
+    try:
+        return reidentify(s, nominal, _plain=plain)
+    finally:
+        LINEAR_FITS.listeners.remove(start)
+        if spare.get("pid"):
+            spare["conn"].close()
+            try:
+                os.kill(spare["pid"], 9)
+            except ProcessLookupError:
+                pass
+            os.waitpid(spare["pid"], 0)
+
+
 def _ahead_worker(jobs: dict, conn) -> None:
     out = {}
     try:
         for jn, (s, nominal) in jobs.items():
             try:
-                out[jn] = ("ok", reidentify(s, nominal))
+                out[jn] = ("ok", _reidentify_split(s, nominal, (conn,)))
             except _CAUGHT as e:
                 out[jn] = ("caught", str(e))
             except Exception:                           # a fault: the discovery's process repeats it

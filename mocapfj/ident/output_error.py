@@ -110,13 +110,16 @@ _DEBUG = bool(os.environ.get("MOCAPFJ_OE_DEBUG"))
 
 
 class _FitMemo:
-    """A few recent linear-spring fits of identify_output_error by their inputs' content (thread-safe)."""
+    """A few recent linear-spring fits of identify_output_error by their inputs' content (thread-safe).
+    `listeners`: callables told each new key once it is stored (discovery's worker starts the
+    effect-free re-identification from it, mocapfj.discover.reident)."""
 
     def __init__(self, size: int = 4):
         import collections
         import threading
 
         self._d, self._size, self._lock = collections.OrderedDict(), size, threading.Lock()
+        self.listeners = []
 
     def get(self, key):
         with self._lock:
@@ -130,9 +133,12 @@ class _FitMemo:
             self._d[key] = value
             while len(self._d) > self._size:
                 self._d.popitem(last=False)
+        for f in list(self.listeners):
+            f(key)
 
 
-_LINEAR_FITS = _FitMemo()
+LINEAR_FITS = _FitMemo()
+_LINEAR_FITS = LINEAR_FITS
 
 
 def content_digest(*parts) -> bytes:

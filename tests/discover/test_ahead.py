@@ -64,3 +64,32 @@ def test_closed_before_use_stops_the_worker(half_trial):
     ahead = Ahead({"j1": (s, nominal)})
     ahead.close()
     assert not ahead._proc.is_alive()
+
+
+def test_the_plain_identification_from_the_spare_process_is_the_same(half_trial, monkeypatch):
+    """When the full re-identification names an effect, the one with a linear spring only comes
+    from a second forked process (started once the shared linear fit is done): the same numbers
+    as made here. An effect is forced so that the plain identification is needed."""
+    from mocapfj.discover import reident
+
+    s, nominal = half_trial
+    real = reident._effects_of
+    monkeypatch.setattr(reident, "_effects_of", lambda ident, sig: real(ident, sig) or [
+        {"name": "stiffening", "parameters": {}, "explanation": "forced by the test"}])
+    from mocapfj.ident.output_error import LINEAR_FITS
+
+    forks = []
+    fork = reident.os.fork
+    monkeypatch.setattr(reident.os, "fork", lambda: forks.append(1) or fork())
+    with threadpool_limits(1, user_api="blas"):
+        here = reidentify(s, nominal)
+        LINEAR_FITS._d.clear()                      # the linear fit made again, so the spare starts
+        import mocapfj.ident.joint as joint
+
+        calls, identify = [], joint.identify_signals
+        monkeypatch.setattr(joint, "identify_signals", lambda *a, **k: calls.append(k["spring_models"]) or identify(*a, **k))
+        there = reident._reidentify_split(s, nominal)
+    assert len(forks) == 1
+    assert calls == [("linear", "cubic", "bouc_wen")]     # the linear-only one was made in the spare process
+    assert _params(there) == _params(here) and there.base == here.base and there.model == here.model
+    assert not LINEAR_FITS.listeners                # the worker's listener is removed
