@@ -91,6 +91,12 @@ def gravity_grid(seeds, periods=5, m=2):
         noise = NOISE[name][1]
         for share in (-0.05, -0.009, 0.02):
             g = share * p["k"]
+            hold = kp * p["k"] / (kp + p["k"]) + g          # the static stiffness the PD loop holds the link with
+            if hold <= 0:
+                print(f"| {name} | {share:+.3f} | 0 | - (not simulated: the PD loop cannot hold the link against "
+                      f"gravity, kp k / (kp + k) + g = {hold:.4g} N m/rad; the recording would diverge) | | | | |",
+                      flush=True)
+                continue
             e1, z1, zg, e0, z0 = [], [], [], [], []
             for seed in seeds:
                 ms = design_multisine(FS, 2048, 0.5, fmax, rms=0.01, seed=seed)

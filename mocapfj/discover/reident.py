@@ -238,20 +238,22 @@ class Ahead:
     re-identification (the longest stage: some twenty output-error fits) run on two cores side by
     side. :meth:`get` returns the same result :func:`reidentify` would return in this process, or
     raises what it would raise (a fault in the worker, or a worker that died, is repeated here).
-    Where fork is unavailable (not Linux) or `parallel` is False, everything runs in :meth:`get`."""
+    Where fork is unavailable (not Linux), in a daemonic process (a Dask worker: it may not start
+    processes) or with `parallel` False, everything runs in :meth:`get`."""
 
     def __init__(self, jobs: dict, parallel: bool = True):
         self._jobs = dict(jobs)
         self._results = None
         self._proc = self._conn = None
         if (parallel and self._jobs and sys.platform.startswith("linux")
-                and "fork" in multiprocessing.get_all_start_methods() and (os.cpu_count() or 1) > 1):
+                and "fork" in multiprocessing.get_all_start_methods() and (os.cpu_count() or 1) > 1
+                and not multiprocessing.current_process().daemon):      # a Dask worker may not have children
             ctx = multiprocessing.get_context("fork")
             recv, send = ctx.Pipe(duplex=False)
             try:
                 proc = ctx.Process(target=_ahead_worker, args=(self._jobs, send), daemon=True)
                 proc.start()
-            except OSError:                              # no process to spare: in this one
+            except (OSError, AssertionError):            # no process to spare: in this one
                 recv.close()
             else:
                 self._proc, self._conn = proc, recv

@@ -138,6 +138,10 @@ class FRF:
                 "distortion": self.distortion.to_dict()}
 
 
+GROWTH_LIMIT = 10.0
+"""The largest ratio of two periods' RMS in one realisation of a record estimate_frf accepts."""
+
+
 def _blocks(name, x, n_samples, skip):
     x = np.asarray(x, dtype=np.float64)
     if x.ndim == 1:
@@ -153,6 +157,20 @@ def _blocks(name, x, n_samples, skip):
                          "2 to measure the noise)", f"{x.shape[1] / n_samples:.3g} periods",
                          hint="record more periods or lower the transient count")
     x = x[:, skip * n_samples:(skip + p) * n_samples].reshape(x.shape[0], p, n_samples)
+    # a steady periodic record: each period's RMS (about its mean) within GROWTH_LIMIT of the
+    # others'. A record that grows (or dies out) by orders of magnitude is an unstable loop or a
+    # transient, and its FRF would be a confident number about nothing
+    with np.errstate(over="ignore", invalid="ignore"):
+        rms = np.sqrt(np.mean((x - x.mean(axis=-1, keepdims=True)) ** 2, axis=-1))        # (M, P)
+    lo, hi = rms.min(axis=1), rms.max(axis=1)
+    bad = ~(hi <= GROWTH_LIMIT * np.maximum(lo, 1e-300)) & (hi > 0)
+    if bad.any():
+        m = int(np.argmax(bad))
+        raise InputError(None, name, f"a steady periodic record (each period's RMS within {GROWTH_LIMIT:g}x of the "
+                         "others')", f"period RMS from {lo[m]:.3g} to {hi[m]:.3g} in realisation {m + 1} "
+                         f"(periods {int(np.argmin(rms[m])) + skip + 1} and {int(np.argmax(rms[m])) + skip + 1})",
+                         hint="an unstable loop, or a transient not yet over: check the controller, or drop more "
+                              "periods (transient_periods)")
     return np.fft.rfft(x, axis=-1) * (2.0 / n_samples), x.shape
 
 
@@ -223,7 +241,8 @@ def estimate_frf(u, y, fs_hz: float, period_samples: int, *, r=None, estimator: 
         Excited DFT lines; None: those where the period-mean amplitude of r (else u) exceeds
         `min_rel_amplitude` times its largest and twice its period-to-period noise SD.
 
-    Raises InputError for too few periods, an unknown estimator, a line without input (an
+    Raises InputError for too few periods, a record that is not steady (two periods' RMS more than
+    GROWTH_LIMIT apart: an unstable loop or a transient), an unknown estimator, a line without input (an
     unexcited frequency) or an input spectrum that vanishes in a realisation.
     """
     if estimator not in FRF_ESTIMATORS:

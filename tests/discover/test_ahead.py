@@ -93,3 +93,33 @@ def test_the_plain_identification_from_the_spare_process_is_the_same(half_trial,
     assert calls == [("linear", "cubic", "bouc_wen")]     # the linear-only one was made in the spare process
     assert _params(there) == _params(here) and there.base == here.base and there.model == here.model
     assert not LINEAR_FITS.listeners                # the worker's listener is removed
+
+
+def _in_daemon(jobs, conn):
+    try:
+        ahead = Ahead(jobs)
+        conn.send(("worker" if ahead._proc is not None else "here", None))
+        ahead.get("j1")
+    except (ReidentificationError, InputError) as e:       # here: InputError itself, as without a worker
+        conn.send(("error", str(e)))
+    except BaseException as e:                           # noqa: BLE001 - sent to the test
+        conn.send(("crash", repr(e)))
+    conn.close()
+
+
+def test_in_a_daemonic_process_it_runs_there(half_trial):
+    """A Dask worker is a daemonic process, which may not start processes: the re-identification
+    then runs in it, with the same one-line error."""
+    import multiprocessing
+
+    s, nominal = half_trial
+    ctx = multiprocessing.get_context("fork")
+    recv, send = ctx.Pipe(duplex=False)
+    p = ctx.Process(target=_in_daemon, args=({"j1": (segment(s, 0.0, 0.2), nominal)}, send), daemon=True)
+    p.start()
+    send.close()
+    where, _ = recv.recv()
+    kind, msg = recv.recv()
+    p.join(30)
+    assert (where, kind) == ("here", "error"), msg
+    assert "samples" in msg
