@@ -18,6 +18,7 @@ from __future__ import annotations
 import multiprocessing
 import os
 import sys
+import time
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -144,6 +145,22 @@ def reidentify(s: JointSignals, nominal: JointModel, _plain=None) -> Reidentifie
 _CAUGHT = (InputError, RuntimeError, FloatingPointError, np.linalg.LinAlgError)
 
 
+STALL_S = 60.0
+"""A worker that uses no CPU for this long while the discovery waits for it is taken as stalled."""
+POLL_S = 1.0
+
+
+def _cpu_seconds(pid: int) -> float | None:
+    """The CPU time (user + system, in clock ticks) process pid has used, from /proc (Linux, where
+    the worker runs); None when it cannot be read."""
+    try:
+        with open(f"/proc/{pid}/stat", "rb") as f:
+            fields = f.read().rsplit(b")", 1)[1].split()
+        return float(int(fields[11]) + int(fields[12]))
+    except (OSError, IndexError, ValueError):
+        return None
+
+
 class ReidentificationError(RuntimeError):
     """A re-identification in the worker failed the way :func:`reidentify` can (bad or
     non-physical signals): its one-line message, raised again in the discovery's process."""
@@ -264,13 +281,31 @@ class Ahead:
             self._results = {}
             if self._conn is not None:
                 try:
-                    self._results = self._conn.recv()
+                    if self._wait():
+                        self._results = self._conn.recv()
                 except (EOFError, OSError):
                     self._results = {}                   # the worker died: each joint again here
                 finally:
                     self._conn.close()
+                    if self._proc.is_alive():
+                        self._proc.kill()
                     self._proc.join()
         return self._results
+
+    def _wait(self) -> bool:
+        """Wait for the worker's answer: True when it is there, False when the worker stalled (no
+        CPU time used for STALL_S while alive: a lock held at the fork by another thread of this
+        process can deadlock a forked child) or died without one; the caller then works here."""
+        cpu, since = _cpu_seconds(self._proc.pid), time.monotonic()
+        while not self._conn.poll(POLL_S):
+            if not self._proc.is_alive():
+                return self._conn.poll(0)
+            now = _cpu_seconds(self._proc.pid)
+            if now is None or now != cpu:
+                cpu, since = now, time.monotonic()
+            elif time.monotonic() - since > STALL_S:
+                return False
+        return True
 
     def get(self, jn: str) -> Reidentified:
         kind, value = self._collect().get(jn, ("other", None))

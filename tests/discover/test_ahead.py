@@ -123,3 +123,28 @@ def test_in_a_daemonic_process_it_runs_there(half_trial):
     p.join(30)
     assert (where, kind) == ("here", "error"), msg
     assert "samples" in msg
+
+
+def _stalled_worker(jobs, conn):
+    import time
+
+    time.sleep(600)                                      # alive, using no CPU: a deadlocked child
+
+
+def test_a_stalled_worker_is_given_up_and_the_work_done_here(half_trial, monkeypatch):
+    """A forked child can deadlock on a lock another thread held at the fork: a worker alive but
+    using no CPU for STALL_S is killed and the re-identification made in this process (here the
+    2.4 s trial's own one-line InputError, raised directly), not waited for forever."""
+    import time
+
+    from mocapfj.discover import reident
+
+    s, nominal = half_trial
+    monkeypatch.setattr(reident, "_ahead_worker", _stalled_worker)
+    monkeypatch.setattr(reident, "STALL_S", 2.0)
+    monkeypatch.setattr(reident, "POLL_S", 0.2)
+    ahead = Ahead({"j1": (segment(s, 0.0, 0.2), nominal)})
+    t0 = time.monotonic()
+    with pytest.raises(InputError, match="samples"):
+        ahead.get("j1")
+    assert time.monotonic() - t0 < 30 and not ahead._proc.is_alive()
