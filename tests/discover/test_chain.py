@@ -5,6 +5,7 @@ trials is benchmarks/bench_discover.py (table in docs/discovery.md)."""
 from __future__ import annotations
 
 import json
+import sys
 from pathlib import Path
 
 import pytest
@@ -105,3 +106,48 @@ def test_a_mismatch_outside_the_library_is_reported_not_hidden(tmp_path_factory,
     assert s["remaining"]["j2"]["link_unexplained"] and s["remaining"]["j3"]["link_unexplained"]
     assert "a mismatch no effect of the library explains remains on" in s["verdict"]
     assert "j2 (link residual" in s["verdict"] and "j3 (link residual" in s["verdict"]
+
+
+def _children(pid: int) -> list[int]:
+    import os
+
+    out = []
+    for d in os.listdir("/proc"):
+        if d.isdigit():
+            try:
+                with open(f"/proc/{d}/stat", "rb") as f:
+                    if int(f.read().rsplit(b")", 1)[1].split()[1]) == pid:
+                        out.append(int(d))
+            except (OSError, IndexError, ValueError):
+                pass
+    return out
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="the worker is forked on Linux only")
+def test_ctrl_c_while_the_worker_runs_leaves_no_process_and_nothing_written(tmp_path_factory):
+    """Ctrl-C (SIGINT to the terminal's process group) while the re-identification runs in its
+    worker: one line, exit 130, no traceback from either process, no process left, no output."""
+    import os
+    import signal
+    import subprocess
+    import time
+
+    ident = _bundle(tmp_path_factory, ROOT / "datasets" / "suite" / "hysteresis_ident.toml", 20.0)
+    out = ident.parent / "out"
+    p = subprocess.Popen([sys.executable, "-m", "mocapfj.cli", "discover", str(ident), "--out", str(out), "--model",
+                          str(ROOT / "datasets" / "suite" / "hysteresis_ident.toml")],
+                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
+    deadline = time.monotonic() + 120
+    while not _children(p.pid) and p.poll() is None and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert p.poll() is None and _children(p.pid), "no worker seen before the run ended"
+    os.killpg(p.pid, signal.SIGINT)
+    _, err = p.communicate(timeout=60)
+    assert p.returncode == 130 and err.count("\n") == 1 and "interrupted" in err and "Traceback" not in err, err
+    time.sleep(1.0)
+    try:
+        os.killpg(p.pid, 0)                              # anyone left in the group
+        left = True
+    except ProcessLookupError:
+        left = False
+    assert not left and not out.exists()
