@@ -554,9 +554,7 @@ def discover(signals: dict, models: dict, *, fs_hz: float, validation: dict | No
     unknown = [e for e in effects if e not in FITTERS]
     if unknown:
         raise InputError(None, "effects", f"names from {list(EFFECTS)}", unknown)
-    missing = [n for n in signals if n not in models]
-    if missing:
-        raise InputError(None, "model", f"a model for every joint of the recording {list(signals)}", f"none for {missing}")
+    _check_models(signals, models)
     from threadpoolctl import threadpool_limits
 
     key = _ahead_key(signals, models, validation, holdout)
@@ -575,6 +573,12 @@ def discover(signals: dict, models: dict, *, fs_hz: float, validation: dict | No
     finally:
         if ahead is not None:
             ahead.close()
+
+
+def _check_models(signals: dict, models: dict) -> None:
+    missing = [n for n in signals if n not in models]
+    if missing:
+        raise InputError(None, "model", f"a model for every joint of the recording {list(signals)}", f"none for {missing}")
 
 
 def _ahead_key(signals: dict, models: dict, validation, holdout: float) -> bytes:
@@ -599,9 +603,7 @@ def reidentification_ahead(signals: dict, models: dict, validation=None, holdout
 
     from .reident import Ahead
 
-    missing = [n for n in signals if n not in models]
-    if missing:
-        raise InputError(None, "model", f"a model for every joint of the recording {list(signals)}", f"none for {missing}")
+    _check_models(signals, models)
     with threadpool_limits(1, user_api="blas"):         # the worker inherits it
         ahead = Ahead({jn: (_train(signals[jn], validation is not None and jn in validation, holdout), models[jn])
                        for jn in signals}, parallel=parallel)

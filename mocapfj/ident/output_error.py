@@ -138,7 +138,6 @@ class _FitMemo:
 
 
 LINEAR_FITS = _FitMemo()
-_LINEAR_FITS = LINEAR_FITS
 
 
 def content_digest(*parts) -> bytes:
@@ -1041,17 +1040,17 @@ def identify_output_error(t, q, q_m, u, *, fs_hz: float, measured=None, controll
 
     # steps 1-4, the linear-spring fit, depend only on the signals and these settings: a second
     # identification of the same signals (discovery's effect-free re-identification after the
-    # one with every spring model) takes them from the first (_LINEAR_FITS), not again
+    # one with every spring model) takes them from the first (LINEAR_FITS), not again
     key = content_digest(t, q, q_m, u, measured, controller, band_hz, trim_s, friction_scales, x0, max_nfev,
                           link_band_fraction, clock_offset_s)
-    hit = _LINEAR_FITS.get(key)
+    hit = LINEAR_FITS.get(key)
     if hit is not None:
         law, x, band, scores, noise, cost, others, nfev = hit
         x, scores, others = x.copy(), dict(scores), [(c, xs.copy()) for c, xs in others]
         prob = _Problem(data_at(band), law, scale, noise, dt=clock_offset_s)
     else:
         law, x, band, scores, noise, cost, others, prob = _linear_fit()
-        _LINEAR_FITS.put(key, (law, x.copy(), band, dict(scores), noise, cost,
+        LINEAR_FITS.put(key, (law, x.copy(), band, dict(scores), noise, cost,
                                [(c, xs.copy()) for c, xs in others], nfev))
 
     # 5b. a stiffening (or softening) spring: k delta + k3 delta^3, kept when the data want it by far

@@ -189,13 +189,13 @@ def test_a_second_identification_of_the_same_signals_reuses_the_linear_fit(famil
 
     _, s = family_signals["cobot"]
     kw = dict(fs_hz=s.fs_hz, measured=s.measured, controller=(s.t_c, s.q_m_c, s.u_c, s.fs_c_hz))
-    oe_mod._LINEAR_FITS._d.clear()
+    oe_mod.LINEAR_FITS._d.clear()
     fresh = oe_mod.identify_output_error(s.t, s.q, s.q_m, s.u, test_cubic=False, test_hysteresis=False, **kw)
-    oe_mod._LINEAR_FITS._d.clear()
+    oe_mod.LINEAR_FITS._d.clear()
     oe_mod.identify_output_error(s.t, s.q, s.q_m, s.u, **kw)                   # every spring model
     hits = []
-    get = oe_mod._LINEAR_FITS.get
-    monkeypatch.setattr(oe_mod._LINEAR_FITS, "get", lambda key: hits.append(get(key) is not None) or get(key))
+    get = oe_mod.LINEAR_FITS.get
+    monkeypatch.setattr(oe_mod.LINEAR_FITS, "get", lambda key: hits.append(get(key) is not None) or get(key))
     again = oe_mod.identify_output_error(s.t, s.q, s.q_m, s.u, test_cubic=False, test_hysteresis=False, **kw)
     assert hits == [True]
     for a, b in ((fresh.fit.values, again.fit.values), (fresh.fit.std, again.fit.std), (fresh.fit.cov, again.fit.cov)):
