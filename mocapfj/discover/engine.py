@@ -418,7 +418,8 @@ def _reidentification(jn, s, nominal, current, found, rejected, held_out, on_val
         return simulate_joint(model, data.t, data.q, data.q_m, data.u, others, band_hz=band)
 
     try:
-        R = reidentify(train, nominal) if ahead is None else ahead.get(jn)
+        R = (reidentify(train, nominal, _train_context(others_trial.get(ROBOT_KEY), jn, s, on_valid, holdout))
+             if ahead is None else ahead.get(jn))
         oe_base = sim(R.base)
     except (InputError, ReidentificationError, RuntimeError, FloatingPointError, np.linalg.LinAlgError) as e:
         return {"error": f"not re-identified: {e}"}
@@ -519,6 +520,16 @@ def _reidentification(jn, s, nominal, current, found, rejected, held_out, on_val
     return report
 
 
+def _train_context(rc, jn: str, s: JointSignals, on_valid: bool, holdout: float):
+    """A robot's joint's :class:`.context.LinkContext` over what it is re-identified on (:func:`_train`),
+    from the trial's :class:`.context.RobotContext` `rc`; None for a single joint."""
+    from .reident import segment_mask
+
+    if rc is None or jn not in rc.links:
+        return None
+    return rc.of(jn) if on_valid else rc.of(jn)[segment_mask(s, 0.0, 1.0 - holdout)]
+
+
 def _train(s: JointSignals, on_valid: bool, holdout: float) -> JointSignals:
     """What a joint is re-identified on: the whole trial when a validation recording holds the
     evidence out, else the trial's first 1 - holdout."""
@@ -604,10 +615,18 @@ def reidentification_ahead(signals: dict, models: dict, validation=None, holdout
     from .reident import Ahead
 
     _check_models(signals, models)
+    nominal = {n: models[n] for n in signals}
+    robot = robot_of(nominal)
+    rc = robot_context(robot, signals, nominal) if robot is not None else None
+    jobs = {}
+    for jn in signals:
+        on_valid = validation is not None and jn in validation
+        jobs[jn] = (_train(signals[jn], on_valid, holdout), models[jn],
+                    _train_context(rc, jn, signals[jn], on_valid, holdout))
     with threadpool_limits(1, user_api="blas"):         # the worker inherits it
-        ahead = Ahead({jn: (_train(signals[jn], validation is not None and jn in validation, holdout), models[jn])
-                       for jn in signals}, parallel=parallel)
+        ahead = Ahead(jobs, parallel=parallel)
     ahead.key = _ahead_key(signals, models, validation, holdout)
+    ahead.robot_context = rc                             # the trial's, for discover (the same key)
     return ahead
 
 
@@ -620,7 +639,9 @@ def _discover(signals: dict, models: dict, ahead, *, fs_hz: float, validation: d
     names = list(signals)
     # a URDF robot's joints: what the other links put on each, from each recording (module .context)
     robot = robot_of(nominal)
-    ctx = robot_context(robot, signals, nominal) if robot is not None else None
+    ctx = getattr(ahead, "robot_context", None)
+    if ctx is None and robot is not None:
+        ctx = robot_context(robot, signals, nominal)
     fams, qdd = _families_all(current, signals, fs_hz, ctx)
     location = {n: locate(fams[n]) for n in names}
     found, rejected, banned = [], [], set()

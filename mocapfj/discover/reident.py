@@ -27,7 +27,7 @@ from ..errors import InputError
 from ..dynamics import JointModel
 from ..types import JointSignals
 
-__all__ = ["Reidentified", "reidentify", "segment", "REID_EFFECTS"]
+__all__ = ["Reidentified", "reidentify", "segment", "segment_mask", "REID_EFFECTS"]
 
 REID_EFFECTS = ("stiffening", "hysteresis", "time_delay")
 """The effects the re-identification fits with the nominal parameters."""
@@ -49,12 +49,18 @@ class Reidentified:
     identification: object = field(repr=False, default=None)
 
 
+def segment_mask(s: JointSignals, start: float, end: float) -> np.ndarray:
+    """The (T,) mask of a joint's mocap samples between fractions `start` and `end` of its span."""
+    t0, t1 = float(s.t[0]), float(s.t[-1])
+    return (s.t >= t0 + start * (t1 - t0)) & (s.t <= t0 + end * (t1 - t0))
+
+
 def segment(s: JointSignals, start: float, end: float) -> JointSignals:
     """The part of a joint's signals between fractions `start` and `end` of its span (mocap and
     controller samples alike)."""
     t0, t1 = float(s.t[0]), float(s.t[-1])
     a, b = t0 + start * (t1 - t0), t0 + end * (t1 - t0)
-    m = (s.t >= a) & (s.t <= b)
+    m = segment_mask(s, start, end)
     kw = {}
     if s.t_c is not None:
         mc = (s.t_c >= a - 1e-9) & (s.t_c <= b + 1e-9)
@@ -68,7 +74,7 @@ def _keep_terms(model: JointModel, nominal: JointModel) -> JointModel:
     """The re-identified model with the nominal's name and its terms single-joint output error
     does not fit (coupling, transmission error, position torque, torque gain)."""
     return model.with_(name=nominal.name, coupling=dict(nominal.coupling), transmission_error=nominal.transmission_error,
-                       position_torque=nominal.position_torque, torque_gain=nominal.torque_gain)
+                       position_torque=nominal.position_torque, torque_gain=nominal.torque_gain, robot=nominal.robot)
 
 
 def _effects_of(ident, s: JointSignals) -> list[dict]:
@@ -110,22 +116,27 @@ def _effects_of(ident, s: JointSignals) -> list[dict]:
     return out
 
 
-def reidentify(s: JointSignals, nominal: JointModel, _plain=None) -> Reidentified:
+def reidentify(s: JointSignals, nominal: JointModel, context=None, _plain=None) -> Reidentified:
     """Re-identify a joint with its nominal parameters free (module docstring). Raises InputError
-    when the signals cannot be identified (too short, non-physical). `_plain`: a callable giving
-    the identification with a linear spring only (computed elsewhere; :func:`_reidentify_split`)."""
+    when the signals cannot be identified (too short, non-physical). `context`: a robot's joint's
+    :class:`.context.LinkContext` at the samples of `s` (its link simulated in the recorded
+    motion of the others; its I, mglx, mgly then its own terms added to the robot's). `_plain`: a
+    callable giving the identification with a linear spring only (computed elsewhere;
+    :func:`_reidentify_split`)."""
     from ..ident.joint import identify_signals
 
-    if nominal.robot is not None:
-        raise InputError(None, f"model.joints[{nominal.name}]", "a single joint (the re-identification of a URDF "
-                         "robot's joint in its context is not implemented)", "a joint of a URDF robot")
+    if (nominal.robot is not None) != (context is not None):
+        raise InputError(None, f"model.joints[{nominal.name}]", "a robot's joint with its context, or a single joint "
+                         "without one", "a robot's joint without its context" if context is None else
+                         "a context for a single joint")
+    kw = {} if context is None else {"link_context": context.arrays()}
     full = identify_signals(s, gear_ratio=nominal.gear_ratio, spring_models=("linear", "cubic", "bouc_wen"),
-                            fit_clock_offset=True)
+                            fit_clock_offset=True, **kw)
     effects = _effects_of(full, s)
     delay = next((e["parameters"]["delay_s"] for e in effects if e["name"] == "time_delay"), 0.0)
     model = _keep_terms(full.model, nominal).with_(delay_s=float(delay))
     plain = full if not effects else (_plain() if _plain is not None else
-                                      identify_signals(s, gear_ratio=nominal.gear_ratio, spring_models=("linear",)))
+                                      identify_signals(s, gear_ratio=nominal.gear_ratio, spring_models=("linear",), **kw))
     base = _keep_terms(plain.model, nominal)
     params = {}
     for n in _NOMINAL:
@@ -166,7 +177,7 @@ class ReidentificationError(RuntimeError):
     non-physical signals): its one-line message, raised again in the discovery's process."""
 
 
-def _reidentify_split(s: JointSignals, nominal: JointModel, close_in_spare=()) -> Reidentified:
+def _reidentify_split(s: JointSignals, nominal: JointModel, context=None, close_in_spare=()) -> Reidentified:
     """:func:`reidentify` on two cores: the identification with a linear spring only (needed
     when the full one finds an effect) is made in a second forked process as soon as the linear
     fit both share is done (its memo, mocapfj.ident.output_error.LINEAR_FITS, inherited), while
@@ -176,8 +187,10 @@ def _reidentify_split(s: JointSignals, nominal: JointModel, close_in_spare=()) -
     from ..ident.joint import identify_signals
     from ..ident.output_error import LINEAR_FITS
 
+    kw = {} if context is None else {"link_context": context.arrays()}
+
     def plain_here():
-        return identify_signals(s, gear_ratio=nominal.gear_ratio, spring_models=("linear",))
+        return identify_signals(s, gear_ratio=nominal.gear_ratio, spring_models=("linear",), **kw)
 
     spare = {}
 
@@ -218,7 +231,7 @@ def _reidentify_split(s: JointSignals, nominal: JointModel, close_in_spare=()) -
 
     LINEAR_FITS.listeners.append(start)
     try:
-        return reidentify(s, nominal, _plain=plain)
+        return reidentify(s, nominal, context, _plain=plain)
     finally:
         LINEAR_FITS.listeners.remove(start)
         if spare.get("pid"):
@@ -233,9 +246,9 @@ def _reidentify_split(s: JointSignals, nominal: JointModel, close_in_spare=()) -
 def _ahead_worker(jobs: dict, conn) -> None:
     out = {}
     try:
-        for jn, (s, nominal) in jobs.items():
+        for jn, (s, nominal, context) in jobs.items():
             try:
-                out[jn] = ("ok", _reidentify_split(s, nominal, (conn,)))
+                out[jn] = ("ok", _reidentify_split(s, nominal, context, (conn,)))
             except _CAUGHT as e:
                 out[jn] = ("caught", str(e))
             except Exception:                           # a fault: the discovery's process repeats it
@@ -249,8 +262,8 @@ def _ahead_worker(jobs: dict, conn) -> None:
 
 
 class Ahead:
-    """The re-identifications of a discovery's joints (:func:`reidentify` of each (signals, nominal)
-    of `jobs`), started at once in a forked worker process: they depend only on the trial and the
+    """The re-identifications of a discovery's joints (:func:`reidentify` of each (signals, nominal,
+    context) of `jobs`), started at once in a forked worker process: they depend only on the trial and the
     nominal model, not on what the search finds, so the search (one process, one core) and the
     re-identification (the longest stage: some twenty output-error fits) run on two cores side by
     side. :meth:`get` returns the same result :func:`reidentify` would return in this process, or

@@ -59,7 +59,8 @@ def _kernel():
         from numba import njit
 
         @njit(cache=True, fastmath=False)
-        def run(q_m, qd_m, dt, n_sub, I, mglx, mgly, c, v, k, eps, k3, q0, w0, dq0, sens):  # pragma: no cover - compiled
+        def run(q_m, qd_m, dt, n_sub, I0, mglx0, mgly0, c, v, k, eps, k3, q0, w0, dq0, sens,
+                ctx, cI, cgx, cgy, cex):  # pragma: no cover - compiled
             T = q_m.shape[0]
             q_out = np.empty(T)
             w_out = np.empty(T)
@@ -73,10 +74,17 @@ def _kernel():
             dp = np.zeros(8)
             dmass = np.zeros(8)
             h = dt / n_sub
+            I = I0
+            mglx = mglx0
+            mgly = mgly0
+            tx = 0.0
+            I_min = I0
+            if ctx:
+                I_min = I0 + cI.min()
             mass = I + 0.5 * h * v
             dmass[0] = 1.0
             dmass[4] = 0.5 * h
-            if eps > 0.0 and h * c > eps * I:
+            if eps > 0.0 and h * c > eps * I_min:
                 eps = 0.0                                    # stiffer than the step resolves: sign
             q = q0
             w = w0
@@ -94,13 +102,19 @@ def _kernel():
                     x = (s + 0.5) / n_sub                    # the motor angle by cubic Hermite
                     x2 = x * x
                     x3 = x2 * x
+                    if ctx:                                  # a robot's terms, linear within the sample
+                        I = I0 + cI[i - 1] + x * (cI[i] - cI[i - 1])
+                        mglx = mglx0 + cgx[i - 1] + x * (cgx[i] - cgx[i - 1])
+                        mgly = mgly0 + cgy[i - 1] + x * (cgy[i] - cgy[i - 1])
+                        tx = cex[i - 1] + x * (cex[i] - cex[i - 1])
+                        mass = I + 0.5 * h * v
                     qm = ((2 * x3 - 3 * x2 + 1) * a + (x3 - 2 * x2 + x) * ma + (-2 * x3 + 3 * x2) * b
                           + (x3 - x2) * mb)
                     qmid = q + 0.5 * h * w
                     sn = math.sin(qmid)
                     cs = math.cos(qmid)
                     dl = qm - qmid
-                    F = (k + k3 * dl * dl) * dl + mglx * sn - mgly * cs
+                    F = (k + k3 * dl * dl) * dl + mglx * sn - mgly * cs + tx
                     p = I * w + h * F - 0.5 * h * v * w      # momentum without friction
                     if sens:
                         dFdq = -(k + 3.0 * k3 * dl * dl) + mglx * cs + mgly * sn
@@ -161,7 +175,7 @@ def _kernel():
                             sn2 = math.sin(q_stop)
                             cs2 = math.cos(q_stop)
                             d2 = qm - q_stop
-                            F2 = (k + k3 * d2 * d2) * d2 + mglx * sn2 - mgly * cs2
+                            F2 = (k + k3 * d2 * d2) * d2 + mglx * sn2 - mgly * cs2 + tx
                             a_minus = (w1 - w) / h
                             if sens:                         # at the stop: velocity linear in the step
                                 for j in range(8):
@@ -240,7 +254,7 @@ def substeps(I: float, k: float, dt: float, max_phase: float = 0.05) -> int:
 
 def link_response(q_m, fs_hz: float, *, I: float, mglx: float, mgly: float, c: float, v: float, k: float,
                   eps: float = 0.0, k3: float = 0.0, qd_m=None, q0: float | None = None, w0: float | None = None,
-                  n_sub: int | None = None, sensitivities: bool = False, max_phase: float = 0.05):
+                  n_sub: int | None = None, sensitivities: bool = False, max_phase: float = 0.05, context=None):
     """The link's angle q (T,) rad and velocity q' (T,) rad/s under the motor angle q_m (T,) rad
     sampled at fs_hz (module docstring); `qd_m` (T,) rad/s its velocity (default: central
     differences). `max_phase`: the resonance's advance per substep (accuracy, :func:`substeps`).
@@ -253,26 +267,50 @@ def link_response(q_m, fs_hz: float, *, I: float, mglx: float, mgly: float, c: f
     where the sign law stops the link within a step, the stop time's own dependence on theta is
     taken as linear in the step; a reversal without sticking carries the velocity's sensitivity
     over by the ratio of the accelerations after and before, the saltation of a friction switch;
-    the default initial state's dependence on gravity and k included)."""
+    the default initial state's dependence on gravity and k included).
+
+    context : (I_t, mglx_t, mgly_t, tau_t), each (T,) at the samples of q_m, or None: the link of a
+    robot's joint in the motion of the others (:mod:`mocapfj.discover.context`), as
+    :func:`.link_forward.link_forward` takes it: the inertia is I + I_t, the gravity terms
+    mglx + mglx_t and mgly + mgly_t, and tau_t acts on the link besides, each linear between samples.
+    I, mglx and mgly (the parameters the sensitivities are taken for) are then the joint's own
+    terms added to the robot's, and I + min(I_t) must be positive."""
     q_m = np.ascontiguousarray(q_m, dtype=np.float64)
     if q_m.ndim != 1 or q_m.size < 3 or not np.isfinite(q_m).all():
         raise InputError(None, "q_m", "a finite (T,) motor angle with T >= 3", q_m.shape)
-    vals = (I, k, c, v, eps, mglx, mgly)
-    if not (all(math.isfinite(x) for x in vals) and I > 0 and k > 0 and c >= 0 and v >= 0 and eps >= 0):
+    ctx, I_min = _context_arrays(context, q_m.shape, I)
+    vals = (I_min, k, c, v, eps, mglx, mgly)
+    if not (all(math.isfinite(x) for x in vals) and I_min > 0 and k > 0 and c >= 0 and v >= 0 and eps >= 0):
         raise InputError(None, "I, k, c, v, eps", "finite, I > 0, k > 0, c >= 0, v >= 0, eps >= 0", vals[:5])
     qd_m = np.gradient(q_m) * fs_hz if qd_m is None else np.ascontiguousarray(qd_m, dtype=np.float64)
     dt = 1.0 / fs_hz
     dq0 = np.zeros(N_SENS)
     if q0 is None:
-        g = -mglx * math.sin(q_m[0]) + mgly * math.cos(q_m[0])
+        gx, gy, tx = (mglx + ctx[1][0], mgly + ctx[2][0], ctx[3][0]) if context is not None else (mglx, mgly, 0.0)
+        g = -gx * math.sin(q_m[0]) + gy * math.cos(q_m[0]) - tx
         q0 = q_m[0] - g / k
         dq0[1], dq0[2], dq0[5] = math.sin(q_m[0]) / k, -math.cos(q_m[0]) / k, g / k ** 2   # (k3 neglected)
     if w0 is None:
         w0 = qd_m[0]
     if n_sub is None:
-        n = substeps(I, k, dt, max_phase)
+        n = substeps(I_min, k, dt, max_phase)
     else:
         n = int(n_sub)
     q, w, Sq, Sw = _kernel()(q_m, qd_m, dt, n, float(I), float(mglx), float(mgly), float(c), float(v), float(k),
-                             float(eps), float(k3), float(q0), float(w0), dq0, bool(sensitivities))
+                             float(eps), float(k3), float(q0), float(w0), dq0, bool(sensitivities),
+                             context is not None, *ctx)
     return (q, w, Sq, Sw) if sensitivities else (q, w)
+
+
+_NO_CONTEXT = tuple(np.zeros(1) for _ in range(4))
+
+
+def _context_arrays(context, shape, I: float) -> tuple[tuple, float]:
+    """(the four context arrays, or one-sample zeros without a context; the least link inertia)."""
+    if context is None:
+        return _NO_CONTEXT, I
+    arrs = tuple(np.ascontiguousarray(a, dtype=np.float64) for a in context)
+    if len(arrs) != 4 or not all(a.shape == shape and np.isfinite(a).all() for a in arrs):
+        raise InputError(None, "context", f"four finite {shape} arrays (inertia, mglx, mgly, torque)",
+                         [a.shape for a in arrs])
+    return arrs, float(I + arrs[0].min())

@@ -118,7 +118,8 @@ def _clock_reasons(clock: dict | None, values: dict) -> dict[str, str]:
     return out
 
 
-def _output_error_joint(t, q, q_m, u, fs_hz, decimate, models, measured, controller, cond, fit_clock_offset=False):
+def _output_error_joint(t, q, q_m, u, fs_hz, decimate, models, measured, controller, cond, fit_clock_offset=False,
+                        link_context=None):
     """The output-error branch of :func:`identify_joint`: (parameters, spring, stages, torque RMS,
     q zero, extra JSON, friction smoothing); adds its condition number to `cond`.
 
@@ -126,7 +127,9 @@ def _output_error_joint(t, q, q_m, u, fs_hz, decimate, models, measured, control
     score test finds a loop in the deflection (:func:`.output_error._hysteresis_test`). Motor-first
     then fits the Bouc-Wen spring inside the motor equation, and when it finds it too its
     parameters (spring shape included) are reported, since the output-error model has no such
-    spring; otherwise the linear fit's parameters stand and the spring is the test's.
+    spring; otherwise the linear fit's parameters stand and the spring is the test's. A robot's
+    joint (`link_context`, :func:`.output_error.identify_output_error`'s `context`) keeps the
+    output error's parameters: motor-first's link equation has no robot in it.
     """
     from ..dynamics import BoucWen
     from .determinacy import combinations, judge_parameters
@@ -136,9 +139,9 @@ def _output_error_joint(t, q, q_m, u, fs_hz, decimate, models, measured, control
     hysteretic = any(m in models for m in HYSTERETIC)
     oe = identify_output_error(t, q, q_m, u, fs_hz=fs_hz, measured=measured, controller=controller,
                                test_cubic="cubic" in models, test_hysteresis=hysteretic,
-                               fit_clock_offset=fit_clock_offset)
+                               fit_clock_offset=fit_clock_offset, context=link_context)
     f = oe.fit
-    if oe.hysteresis is not None and hysteretic:
+    if oe.hysteresis is not None and hysteretic and link_context is None:
         try:
             mf = identify_motor_first(t, q, q_m, u, fs_hz=fs_hz, decimate=decimate)
         except InputError:
@@ -191,7 +194,7 @@ MIN_DECIMATED = 200
 def identify_joint(t, q, q_m, u, *, fs_hz: float, method: str = "output_error", cutoff_hz: float | None = None,
                    decimate: int = 2, spring_models=None, name: str = "", gear_ratio: float = 1.0,
                    frames_filled: int = 0, recording: str = "", measured=None, controller=None,
-                   fit_clock_offset: bool = False) -> IdentifiedJoint:
+                   fit_clock_offset: bool = False, link_context=None) -> IdentifiedJoint:
     """Identify one joint from its signals on one clock (docs/identification.md).
 
     Parameters
@@ -215,11 +218,17 @@ def identify_joint(t, q, q_m, u, *, fs_hz: float, method: str = "output_error", 
         The controller's own samples over the same span (output error compares the torque there).
     fit_clock_offset : output error: identify an offset between the mocap and controller clocks
         with the dynamics and apply it (by default it is only tested and reported).
+    link_context : (I_t, mglx_t, mgly_t, tau_t) (T,) each, output error only: a joint of a robot in
+        the recorded motion of the others (:func:`.output_error.identify_output_error`'s `context`);
+        its I, mglx, mgly are then its own terms added to the robot's, and a negative I is a
+        correction to the robot's model, not a finding.
     """
     from .twostep import identify_two_step
 
     if method not in IDENTIFY_METHODS:
         raise InputError(None, "method", f"one of {list(IDENTIFY_METHODS)}", repr(method))
+    if link_context is not None and method != "output_error":
+        raise InputError(None, "method", "output_error for a robot's joint in its context", repr(method))
     n_t = int(np.size(t))
     if isinstance(decimate, bool) or not isinstance(decimate, (int, np.integer)) or decimate < 1:
         raise InputError(None, "decimate", "an integer decimation factor >= 1", repr(decimate))
@@ -248,7 +257,7 @@ def identify_joint(t, q, q_m, u, *, fs_hz: float, method: str = "output_error", 
         raise InputError(None, "spring_models", f"names from {sorted(SPRING_FITTERS)}", unknown)
     if method == "output_error":
         values, spring, stages, torque_rms, q_zero, extra, smoothing = _output_error_joint(
-            t, q, q_m, u, fs_hz, decimate, models, measured, controller, cond, fit_clock_offset)
+            t, q, q_m, u, fs_hz, decimate, models, measured, controller, cond, fit_clock_offset, link_context)
     elif method == "two_step":
         values = {n: Parameter(n, two.step1[n], two.step1.std_of(n)) for n in PARAMETER_NAMES if n != "k"}
         values["k"] = Parameter("k", two.spring["k"], two.spring.std_of("k"))
@@ -259,7 +268,11 @@ def identify_joint(t, q, q_m, u, *, fs_hz: float, method: str = "output_error", 
         mf, spring = _motor_first_spring(t, q, q_m, u, fs_hz, decimate, models)
         values, stages, torque_rms, q_zero = _motor_first_values(mf)
         cond.update(cond_motor=mf.motor.cond, cond_link=mf.link.cond)
-    values = flag_imprecise(flag_nonphysical(values))
+    if link_context is None:
+        values = flag_imprecise(flag_nonphysical(values))
+    else:                               # the joint's own inertia beside the robot's: any sign
+        flagged = flag_nonphysical({n: v for n, v in values.items() if n != "I"})
+        values = flag_imprecise({**flagged, "I": values["I"]} if "I" in values else flagged)
     p = {n: v.value for n, v in values.items()}
     return IdentifiedJoint(name=name, method=method, params=values, model=_model(name, gear_ratio, p, spring, smoothing),
                            spring=spring, stages=stages, cond=cond, torque_rms=float(torque_rms),

@@ -307,8 +307,11 @@ class _Data:
     derivatives, u) and the mocap's (q at t_q, measured mask), and the Hermite weights that take
     a controller-rate simulation to the mocap instants."""
 
-    def __init__(self, t_c, q_m, u, fs_c, t_q, q, measured, trim_s, band_hz, drive=None):
+    def __init__(self, t_c, q_m, u, fs_c, t_q, q, measured, trim_s, band_hz, drive=None, context=None):
         self.fs = fs_c
+        # a robot's joint: its context (I_t, mglx_t, mgly_t, tau_t) at the controller's samples
+        self.context = context
+        self.I_ctx = (float(np.min(context[0])), float(np.mean(context[0]))) if context is not None else (0.0, 0.0)
         self.q_m, self.u = q_m, u
         self.qd_m, self.qdd_m = derivatives(q_m, fs_c)
         # the simulated link's drive: the motor angle without the noise that would ring it
@@ -438,7 +441,8 @@ class _Problem:
         # A trial step towards a vanishing inertia or a huge stiffness raises the resonance, and the
         # kernel's substeps with it, without bound (an hour for one simulation of a light joint):
         # a resonance more than SUBSTEP_GROWTH x the first one simulated is treated as diverged.
-        n = substeps(p["I"], p["k"], 1.0 / self.d.fs, self.max_phase) if p["I"] > 0 and p["k"] > 0 else 1
+        I_min = p["I"] + self.d.I_ctx[0]
+        n = substeps(I_min, p["k"], 1.0 / self.d.fs, self.max_phase) if I_min > 0 and p["k"] > 0 else 1
         if self._n_first is None:
             self._n_first = n
         if n > max(MIN_SUBSTEP_CAP, SUBSTEP_GROWTH * self._n_first):
@@ -446,7 +450,7 @@ class _Problem:
             nan = np.full(T, np.nan)
             return (nan, nan, np.full((T, 8), np.nan), np.full((T, 8), np.nan)) if sens else (nan, nan)
         return link_response(self.d.q_drive, self.d.fs, eps=p["eps"], k3=p["k3"], qd_m=self.d.qd_drive, sensitivities=sens,
-                             max_phase=self.max_phase, **{n: p[n] for n in _LINK})
+                             max_phase=self.max_phase, context=self.d.context, **{n: p[n] for n in _LINK})
 
     def simulate(self, x):
         x = np.asarray(x, dtype=np.float64)
@@ -522,11 +526,16 @@ class _Problem:
         return np.concatenate([iq, iu])
 
 
-def _bounds():
+def _bounds(d: _Data | None = None):
+    """(lower, upper) bounds in OE_NAMES order. A robot's joint (`d` with a context): its own
+    inertia, added to the robot's, may be negative (the URDF's link heavier than the real one),
+    the total kept above a tenth of the robot's least."""
     lo = np.full(len(OE_NAMES), -np.inf)
     hi = np.full(len(OE_NAMES), np.inf)
     for n in ("I", "J", "k"):
         lo[_IDX[n]] = 0.0
+    if d is not None and d.context is not None:
+        lo[_IDX["I"]] = -0.9 * d.I_ctx[0]
     for n in ("c", "v", "b"):
         lo[_IDX[n]] = 0.0
     lo[_IDX["eps"]], hi[_IDX["eps"]] = EPS_RANGE_RAD_S
@@ -535,7 +544,7 @@ def _bounds():
 
 def _inside(prob: _Problem, x) -> np.ndarray:
     """The free parameters of x strictly inside the bounds (I, J, k > 0; one at 0 just above it)."""
-    lo, hi = _bounds()
+    lo, hi = _bounds(prob.d)
     f = prob.free
     return np.minimum(np.maximum(x[f], lo[f] + 1e-6 * prob.scale[f]), np.where(np.isfinite(hi[f]), 0.999 * hi[f], np.inf))
 
@@ -545,7 +554,7 @@ def _solve(prob: _Problem, x0, max_nfev: int, ftol: float = 1e-10):
     (x, cost, evaluations)."""
     from scipy.optimize import least_squares
 
-    lo, hi = _bounds()
+    lo, hi = _bounds(prob.d)
     x0 = np.array(x0, dtype=np.float64)
     prob._x = x0.copy()
     f = prob.free
@@ -555,7 +564,7 @@ def _solve(prob: _Problem, x0, max_nfev: int, ftol: float = 1e-10):
     return prob.full(res.x), float(res.fun @ res.fun), int(res.nfev)
 
 
-def _initial(q, q_m, u, fs_hz, band_hz, trim):
+def _initial(q, q_m, u, fs_hz, band_hz, trim, context=None):
     """A consistent start without simulation, linear in both steps, no noisy regressor.
 
     1. The sum of the two equations with q ~ q_m (the rigid joint; no mocap in it) gives the
@@ -565,6 +574,11 @@ def _initial(q, q_m, u, fs_hz, band_hz, trim):
        q_m - q_mocap = (I q_m'' + v q_m' + [c s + G]) / k - z, with [c s + G] from step 1: linear
        in (I / k, v / k, 1 / k, z), the mocap noise in the output only.
     J = A - I, b = B - v, each of I, v kept within 5-95 % of its total.
+
+    A robot's joint (`context` (I_t, mglx_t, mgly_t, tau_t) at the samples of q): the robot's
+    terms are known, so they are taken out of the torque in step 1 and put in the deflection's
+    known part in step 2; I, mglx, mgly are then the joint's own, added to the robot's, and I is
+    kept within -0.9 min(I_t) and 0.95 A.
     """
     qd, qdd = derivatives(lowpass(q_m, fs_hz, min(0.4 * fs_hz, max(4.0 * band_hz, 20.0))), fs_hz)
     sl = slice(trim, q.size - trim)
@@ -574,7 +588,12 @@ def _initial(q, q_m, u, fs_hz, band_hz, trim):
 
     sgn = np.tanh(qd / (0.02 * max(float(np.std(qd)), 1e-9)))
     Ws = lp(np.column_stack([qdd, qd, sgn, -np.sin(q_m), np.cos(q_m)]))
-    ub = lp(u)
+    robot = 0.0
+    if context is not None:
+        # the robot's inertial, gravity and coupling torque on the link, with q ~ q_m
+        I_t, gx, gy, tau_t = context
+        robot = lp(I_t * qdd - gx * np.sin(q_m) + gy * np.cos(q_m) - tau_t)
+    ub = lp(u) - robot
     from .ls import ls_fit
 
     # ls_fit names the columns the motion does not excite (a motor standing still: all of them)
@@ -582,7 +601,7 @@ def _initial(q, q_m, u, fs_hz, band_hz, trim):
     if not A > 0:
         raise InputError(None, "u, q_m", "a motor torque that accelerates the joint (positive total inertia)",
                          f"I + J = {A:.4g} kg m2", hint="check the signs of q_m and u (docs/conventions.md)")
-    known = Ws[:, 2:] @ np.array([c, mglx, mgly])
+    known = Ws[:, 2:] @ np.array([c, mglx, mgly]) + robot
     Wd = np.column_stack([Ws[:, 0], Ws[:, 1], known, np.ones(known.size)])
     a_I, a_v, a_k, mz = np.linalg.lstsq(Wd, lp(q_m - q), rcond=None)[0]
     if not a_k > 0:
@@ -590,7 +609,8 @@ def _initial(q, q_m, u, fs_hz, band_hz, trim):
                          f"1/k = {a_k:.4g} rad/(N m)",
                          hint="check the signs of q, q_m and u (docs/conventions.md) and the deflection")
     k = 1.0 / a_k
-    I = float(np.clip(a_I * k, 0.05 * A, 0.95 * A))
+    I = float(np.clip(a_I * k, 0.05 * A, 0.95 * A) if context is None else
+              np.clip(a_I * k, -0.9 * float(np.min(context[0])), 0.95 * A))
     B = max(float(B), 0.0)
     v = float(np.clip(a_v * k, 0.05 * B, 0.95 * B)) if B > 0 else 0.0
     return np.array([I, mglx, mgly, max(float(c), 0.0), v, A - I, B - v, k, -mz])
@@ -642,7 +662,8 @@ def _encoder_noise_shift(q_m_c, fs_c, u_c, t_c, t, q, measured, trim_s, band, la
     noise = ((prob.a_q, prob.s_q), (prob.a_u, prob.s_u))
     steps = []
     for _ in range(replicates):
-        d2 = _Data(t_c, q_m_c + rng.normal(0.0, sm, q_m_c.size), u_c, fs_c, t, q, measured, trim_s, band)
+        d2 = _Data(t_c, q_m_c + rng.normal(0.0, sm, q_m_c.size), u_c, fs_c, t, q, measured, trim_s, band,
+                   context=prob.d.context)
         p2 = _Problem(d2, law, scale, noise, cubic=prob.cubic, dt=prob.dt)
         J = p2.jac_full(x)[:, free]
         r = p2.fun(x[p2.free])
@@ -678,7 +699,8 @@ def _wiener_drive_shift(q_m_c, fs_c, u_c, t_c, t, q, measured, trim_s, band, law
     SPLIT_STARTS (short coarse fits), the best refined (up to 20 evaluations). (n,), zeros for
     parameters not in `free`. The split is searched because the two drives can put the cost's
     minimum at very different splits (grid case: I 0.07 raw, 0.38 Wiener-driven, true 0.32)."""
-    d2 = _Data(t_c, q_m_c, u_c, fs_c, t, q, measured, trim_s, band, drive=wiener_drive(q_m_c, fs_c))
+    d2 = _Data(t_c, q_m_c, u_c, fs_c, t, q, measured, trim_s, band, drive=wiener_drive(q_m_c, fs_c),
+               context=prob.d.context)
     noise = ((prob.a_q, prob.s_q), (prob.a_u, prob.s_u))
     search = _Problem(d2, law, scale, noise, max_phase=0.15, cubic=prob.cubic, dt=prob.dt)
     search.free = prob.free & free
@@ -713,7 +735,7 @@ def drive_noise_cost(prob: _Problem, x, sigma_m: float) -> float:
     w = 2 * np.pi * f
     p = dict(zip(OE_NAMES, x))
     damping = p["v"] + (p["c"] / p["eps"] if p["eps"] > 0 else 0.0)
-    H = p["k"] / (p["k"] - p["I"] * w ** 2 + 1j * damping * w)
+    H = p["k"] / (p["k"] - (p["I"] + d.I_ctx[1]) * w ** 2 + 1j * damping * w)
     D = 1j * np.sin(w * h) / h
     N = p["J"] * D ** 2 + p["b"] * D + p["k"] * (1.0 - H)
     B2 = (1.0 / (1.0 + (f / d.band) ** 8)) ** 2 if d.stride > 1 else np.ones_like(f)
@@ -820,7 +842,7 @@ def _clock_offset_fit(prob: _Problem, x, budget: int = 30) -> tuple:
     p2 = _Problem(d, prob.law, prob.scale, ((prob.a_q, prob.s_q), (prob.a_u, prob.s_u)), cubic=prob.cubic)
     p2.free = prob.free.copy()
     f = p2.free
-    lo, hi = _bounds()
+    lo, hi = _bounds(d)
     x = np.asarray(x, dtype=np.float64)
     xf = _inside(prob, x)
     p2._x = x.copy()
@@ -876,7 +898,8 @@ def identify_output_error(t, q, q_m, u, *, fs_hz: float, measured=None, controll
                           friction_scales=FRICTION_SCALES, x0=None, max_nfev: int = 40,
                           link_band_fraction: float = LINK_BAND_FRACTION, test_cubic: bool = True,
                           test_hysteresis: bool = True, test_clock: bool = True,
-                          fit_clock_offset: bool = False, clock_offset_s: float = 0.0) -> OutputErrorResult:
+                          fit_clock_offset: bool = False, clock_offset_s: float = 0.0,
+                          context=None) -> OutputErrorResult:
     """Identify I, mglx, mgly, c, v, J, b, k (and the mocap zero z) by output error (module
     docstring).
 
@@ -906,6 +929,12 @@ def identify_output_error(t, q, q_m, u, *, fs_hz: float, measured=None, controll
     fit_clock_offset : apply the fitted offset when found: the result is the identification with it.
     clock_offset_s : an offset (s) applied throughout: the mocap angle at t is the link's at
         t + clock_offset_s on the controller's clock.
+    context : (I_t, mglx_t, mgly_t, tau_t), each (T,) at t, or None: a joint of a robot, simulated
+        in the recorded motion of the others (:mod:`mocapfj.discover.context`): its link's inertia
+        is I + I_t, its gravity terms mglx + mglx_t and mgly + mgly_t, and tau_t (N m, the other
+        links' inertial and Coriolis torque) acts on it besides. The identified I, mglx, mgly are
+        then the joint's own terms added to the robot's (I may be negative: the robot's model
+        heavier than the link).
 
     Raises
     ------
@@ -930,15 +959,23 @@ def identify_output_error(t, q, q_m, u, *, fs_hz: float, measured=None, controll
         if t[0] < t_c[0] - 1e-9 or t[-1] > t_c[-1] + 1e-9:
             raise InputError(None, "controller", "controller samples covering the mocap span",
                              f"[{t_c[0]:.4f}, {t_c[-1]:.4f}] s for [{t[0]:.4f}, {t[-1]:.4f}] s")
+    ctx_c = None
+    if context is not None:
+        context = tuple(np.asarray(a, dtype=np.float64) for a in context)
+        if len(context) != 4 or not all(a.shape == t.shape and np.isfinite(a).all() for a in context):
+            raise InputError(None, "context", f"four finite {t.shape} arrays (inertia, mglx, mgly, torque)",
+                             [np.shape(a) for a in context])
+        ctx_c = context if t_c is t else tuple(np.interp(t_c, t, a) for a in context)
+    I_mean = float(np.mean(context[0])) if context is not None else 0.0
     f_exc = excitation_bandwidth_hz(q_m, fs_hz)
     band0 = float(np.clip(3.0 * f_exc, 1.0, fs_hz / 5.0))
-    x = _initial(q, q_m, u, fs_hz, band0, trim) if x0 is None else np.asarray(x0, dtype=np.float64)
+    x = (_initial(q, q_m, u, fs_hz, band0, trim, context) if x0 is None else np.asarray(x0, dtype=np.float64))
     f_eiv = eiv_band_hz(q_m_c, fs_c)
     f_max = min(0.4 * fs_c, 60.0, max(f_eiv, band0))
     u_rms = float(np.sqrt(np.mean(u ** 2)))
     v_rms = max(float(np.std(np.gradient(q_m_c) * fs_c)), 1e-9)
     d_ref = max(u_rms / x[7], 1e-9)                     # a deflection's size, rad
-    scale = np.array([x[0], 1e-3 * u_rms, 1e-3 * u_rms, 1e-3 * u_rms, 1e-3 * u_rms / v_rms, x[5],
+    scale = np.array([x[0] + I_mean, 1e-3 * u_rms, 1e-3 * u_rms, 1e-3 * u_rms, 1e-3 * u_rms / v_rms, x[5],
                       1e-3 * u_rms / v_rms, x[7], 1e-6, 1e-3, 1e-3 * x[7] / d_ref ** 2])
     x = np.concatenate([x, [0.0, 0.0]])
     nfev = 0
@@ -946,7 +983,7 @@ def identify_output_error(t, q, q_m, u, *, fs_hz: float, measured=None, controll
 
     def data_at(b_hz):
         if b_hz not in datas:
-            datas[b_hz] = _Data(t_c, q_m_c, u_c, fs_c, t, q, measured, trim_s, b_hz)
+            datas[b_hz] = _Data(t_c, q_m_c, u_c, fs_c, t, q, measured, trim_s, b_hz, context=ctx_c)
         return datas[b_hz]
 
     def fit(b_hz, law, x_start, noise=None, budget=max_nfev, coarse=False, cubic=False, search=False,
@@ -1007,7 +1044,7 @@ def identify_output_error(t, q, q_m, u, *, fs_hz: float, measured=None, controll
         band = b0
         if band_hz is None:
             for _ in range(4):
-                f_link = math.sqrt(x[_IDX["k"]] / x[_IDX["I"]]) / (2 * math.pi)
+                f_link = math.sqrt(x[_IDX["k"]] / (x[_IDX["I"]] + I_mean)) / (2 * math.pi)
                 target = max(b0, min(f_max, link_band_fraction * f_link))
                 if target <= band * 1.05:
                     break
@@ -1027,7 +1064,8 @@ def identify_output_error(t, q, q_m, u, *, fs_hz: float, measured=None, controll
         found = [(cost, x, prob)]
         for frac in (0.6, 1.5):
             xs = x.copy()
-            xs[_IDX["I"]] = min(frac * x[_IDX["I"]], 0.97 * A)
+            # the link's inertia scaled (a robot's: its total, the robot's part included)
+            xs[_IDX["I"]] = min(frac * (x[_IDX["I"]] + I_mean) - I_mean, 0.97 * A)
             xs[_IDX["J"]] = A - xs[_IDX["I"]]
             _, xs, c = fit(band, law, xs, noise, 10)
             if c < cost + AMBIGUITY_CHI2:
@@ -1042,7 +1080,7 @@ def identify_output_error(t, q, q_m, u, *, fs_hz: float, measured=None, controll
     # identification of the same signals (discovery's effect-free re-identification after the
     # one with every spring model) takes them from the first (LINEAR_FITS), not again
     key = content_digest(t, q, q_m, u, measured, controller, band_hz, trim_s, friction_scales, x0, max_nfev,
-                          link_band_fraction, clock_offset_s)
+                          link_band_fraction, clock_offset_s, context)
     hit = LINEAR_FITS.get(key)
     if hit is not None:
         law, x, band, scores, noise, cost, others, nfev = hit
@@ -1123,7 +1161,7 @@ def identify_output_error(t, q, q_m, u, *, fs_hz: float, measured=None, controll
                                           band_hz=band_hz, trim_s=trim_s, friction_scales=friction_scales, x0=x0,
                                           max_nfev=max_nfev, link_band_fraction=link_band_fraction,
                                           test_cubic=test_cubic, test_hysteresis=test_hysteresis, test_clock=False,
-                                          clock_offset_s=dt_abs)
+                                          clock_offset_s=dt_abs, context=context)
             if fit_clock_offset:
                 # the offset is known to about CLOCK_MIN_S (the link model's accuracy in time), and
                 # the viscous split moves with it (v ~ k dt): that uncertainty joins the SDs

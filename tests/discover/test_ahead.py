@@ -28,7 +28,7 @@ def test_the_worker_returns_what_this_process_computes(half_trial):
     s, nominal = half_trial
     with threadpool_limits(1, user_api="blas"):
         here = reidentify(s, nominal)
-        ahead = Ahead({"j1": (s, nominal)})
+        ahead = Ahead({"j1": (s, nominal, None)})
         assert ahead._proc is not None                  # Linux, 2 cores: it did run in a worker
         there = ahead.get("j1")
     assert _params(there) == _params(here)
@@ -41,7 +41,7 @@ def test_the_worker_returns_what_this_process_computes(half_trial):
 
 def test_a_worker_that_dies_is_replaced_by_this_process(half_trial):
     s, nominal = half_trial
-    ahead = Ahead({"j1": (s, nominal)})
+    ahead = Ahead({"j1": (s, nominal, None)})
     ahead._proc.kill()
     R = ahead.get("j1")                                  # computed here instead, not lost
     assert abs(R.parameters["k"]["value"] / nominal.spring.k - 1) < 0.05
@@ -53,7 +53,7 @@ def test_the_workers_error_is_the_same_one_line(half_trial):
     short = segment(s, 0.0, 0.2)                         # 2.4 s: too short for output error
     with pytest.raises(InputError) as here:
         reidentify(short, nominal)
-    ahead = Ahead({"j1": (short, nominal)})
+    ahead = Ahead({"j1": (short, nominal, None)})
     with pytest.raises(ReidentificationError) as there:
         ahead.get("j1")
     assert str(there.value) == str(here.value) and "\n" not in str(there.value)
@@ -61,7 +61,7 @@ def test_the_workers_error_is_the_same_one_line(half_trial):
 
 def test_closed_before_use_stops_the_worker(half_trial):
     s, nominal = half_trial
-    ahead = Ahead({"j1": (s, nominal)})
+    ahead = Ahead({"j1": (s, nominal, None)})
     ahead.close()
     assert not ahead._proc.is_alive()
 
@@ -143,7 +143,7 @@ def test_a_stalled_worker_is_given_up_and_the_work_done_here(half_trial, monkeyp
     monkeypatch.setattr(reident, "_ahead_worker", _stalled_worker)
     monkeypatch.setattr(reident, "STALL_S", 2.0)
     monkeypatch.setattr(reident, "POLL_S", 0.2)
-    ahead = Ahead({"j1": (segment(s, 0.0, 0.2), nominal)})
+    ahead = Ahead({"j1": (segment(s, 0.0, 0.2), nominal, None)})
     t0 = time.monotonic()
     with pytest.raises(InputError, match="samples"):
         ahead.get("j1")
