@@ -72,6 +72,49 @@ def test_same_link_motion_as_the_lsoda_simulator():
     assert _rms(q - s["q"]) < 5e-7 < 1e-3 * np.std(s["delta"])
 
 
+# a robot's joint (mocapfj.discover.context): an inertia, gravity terms and a coupling torque that
+# vary with the other joints' motion
+CONTEXT = (1.5 + 0.5 * np.cos(0.9 * T), 20.0 + 5.0 * np.sin(0.7 * T), 3.0 * np.cos(0.5 * T), 2.0 * np.sin(2.0 * T))
+
+
+@pytest.mark.parametrize("eps", [0.0, 0.02])
+def test_a_robots_joint_moves_as_link_forward_moves_it(eps):
+    """With a context the kernel integrates (I + I_t) q'' = tau_s - F + (mglx + mglx_t) sin q
+    - (mgly + mgly_t) cos q + tau_t, the equation link_forward (discovery's kernel, a peer written
+    apart) integrates with the same context: the same link angle to 1e-9 rad; and a zero context
+    is no context."""
+    from mocapfj.dynamics import CoulombViscous, LinearSpring
+    from mocapfj.dynamics.link_forward import link_forward
+
+    p = dict(I=0.3, mglx=5.0, mgly=-1.0, c=2.0, v=3.0, k=2.0e4)
+    q, _ = link_response(Q_M, FS, qd_m=QD_M, eps=eps, context=CONTEXT, **p)
+    q_f, _, _ = link_forward(Q_M, FS, I=p["I"], mglx=p["mglx"], mgly=p["mgly"], qd_m=QD_M, q0=q[0],
+                             friction=CoulombViscous(c=p["c"], v=p["v"], smoothing=eps), spring=LinearSpring(k=p["k"]),
+                             context=CONTEXT)
+    assert np.abs(q - q_f).max() < 1e-9 < 1e-6 * np.abs(Q_M - q).max()
+    zero = tuple(np.zeros_like(T) for _ in range(4))
+    assert np.array_equal(link_response(Q_M, FS, qd_m=QD_M, eps=eps, context=zero, **p)[0],
+                          link_response(Q_M, FS, qd_m=QD_M, eps=eps, **p)[0])
+
+
+def test_a_robots_joint_has_the_sensitivities_of_its_own_terms():
+    """With a context, d q / d (I, mglx, mgly, c, v, k) of the joint's own terms (added to the
+    robot's) against central differences of the kernel; its own inertia may be negative while the
+    total stays positive."""
+    p = dict(I=-0.4, mglx=5.0, mgly=-1.0, c=2.0, v=3.0, k=2.0e4)
+    _, _, Sq, _ = link_response(Q_M, FS, qd_m=QD_M, context=CONTEXT, sensitivities=True, **p)
+    for j, n in enumerate(("I", "mglx", "mgly", "c", "v", "k")):
+        h = 1e-6 * max(abs(p[n]), 1.0)
+        hi, lo = dict(p), dict(p)
+        hi[n] += h
+        lo[n] -= h
+        fd = (link_response(Q_M, FS, qd_m=QD_M, context=CONTEXT, **hi)[0]
+              - link_response(Q_M, FS, qd_m=QD_M, context=CONTEXT, **lo)[0]) / (2 * h)
+        assert np.linalg.norm(Sq[:, j] - fd) / np.linalg.norm(fd) < 1e-3, n
+    with pytest.raises(InputError, match="I > 0"):            # the total must stay positive
+        link_response(Q_M, FS, context=CONTEXT, **dict(p, I=-1.1))
+
+
 def test_bad_arguments():
     with pytest.raises(InputError, match="I > 0"):
         link_response(Q_M, FS, **dict(PA10, I=-1.0))
