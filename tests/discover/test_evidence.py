@@ -84,3 +84,22 @@ def test_the_held_out_simulation_picks_the_planted_effect_over_the_equation_erro
     assert [e["name"] for e in d.effects][:1] == ["backlash"], (d.verdict, d.rejected)
     cands = {c["name"]: c for c in d.effects[0]["location"]["candidates"]}
     assert cands["backlash"]["held_out_gain_points"] > cands["time_delay"]["held_out_gain_points"]
+
+
+def test_a_validation_recording_that_shows_the_gain_admits_it():
+    """The sum of the held-out gains is judged against the SD of the sum, which the noisier part
+    sets. A candidate is also admissible when the validation recording alone shows its gain beyond
+    3 of its noise SDs and 0.1 points, and the trial's held-out part does not lose it (the numbers of
+    a hysteresis against a re-identified elbow, benchmarks/bench_discover_nlink.py --bias)."""
+    from mocapfj.discover.tournament import Judge, Judged
+
+    judge = Judge({}, None, {}, {}, {}, 0.3, {}, engine.GAIN_SDS, engine.WEAK_MIN_POINTS, 0.01)
+
+    def judged(tail, val):
+        return Judged("j3", None, {}, None, gains={"trial's held-out part": tail, "validation recording": val})
+
+    assert judge._by_validation(judged((1.06, 7.84), (5.10, 0.36)))
+    assert not judge._by_validation(judged((-0.2, 7.84), (5.10, 0.36)))     # the trial's part loses it
+    assert not judge._by_validation(judged((1.06, 7.84), (0.50, 0.20)))     # 2.5 SDs on the validation
+    assert not judge._by_validation(judged((0.02, 0.04), (0.09, 0.01)))     # 9 SDs, but under 0.1 points
+    assert not judge._by_validation(Judged("j3", None, {}, None, gains={"trial's held-out part": (1.06, 0.1)}))
