@@ -99,8 +99,16 @@ class Judge:
             self._ev[key] = ev
         return self._ev[key]
 
+    tail_held_out = True
+    """Whether the trial's last part is held-out evidence where a validation recording is there too
+    (not when the model judged against was fitted on the whole trial: discovery's second search,
+    against a re-identified model)."""
+
     def held_out(self, jn: str) -> list[Evidence]:
-        return [ev for ev in (self.evidence(jn, "tail"), self.evidence(jn, "validation")) if ev is not None]
+        val = self.evidence(jn, "validation")
+        if val is not None and not self.tail_held_out:
+            return [val]
+        return [ev for ev in (self.evidence(jn, "tail"), val) if ev is not None]
 
     def base(self, jn: str, model) -> dict:
         """The current model's scores on joint jn's held-out evidence (kept per model)."""
