@@ -11,6 +11,11 @@ equation-error residual that differentiates that noise, while the output error's
 averages it out (benchmarks/bench_discover_grid.py: cubic stiffenings of 0.3-0.8 x the deflection
 noise on light joints). Here the effect and the nominal parameters are fitted together, and
 the effect is judged against the same re-identification without it (`base`).
+
+A joint of a URDF robot is re-identified in its context (:mod:`.context`: the robot's inertia,
+gravity and the other links' torque along the recording enter the output-error simulation), its
+own I, mglx, mgly fitted as terms added to the robot's; discovery repeats it in the context the
+first pass's models give (:func:`.engine._robot_reidentified`).
 """
 
 from __future__ import annotations
