@@ -146,7 +146,8 @@ def link_motion(robot: Robot, signals: dict, models: dict) -> tuple[np.ndarray, 
 
     signals : {joint: JointSignals} on one clock, holding every moving joint of the robot;
     models : {joint: JointModel}, whose J, b, torque_gain and stiffness rebuild each link's
-    motion from its motor's (the nominal models: the context is the recording's, fixed while
+    motion from its motor's, and whose delay_s puts its mocap angle on the controller's clock
+    (the nominal models: the context is the recording's, fixed while
     discovery changes the models)."""
     from ..ident.conditioning import derivatives, lowpass
     from .memo import spline_rates, wiener_drive_of
@@ -173,7 +174,12 @@ def link_motion(robot: Robot, signals: dict, models: dict) -> tuple[np.ndarray, 
         v[:, j], a[:, j] = qd_m - dd, qdd_m - ddd
         # the recorded link angle, its zero (the joints stage's is the motor's, off by the mean
         # deflection) set by the spring: the mean of q_m - tau_s / k
-        q_l = lowpass(np.asarray(s.q, dtype=np.float64), fs, LINK_HZ)
+        q_rec = np.asarray(s.q, dtype=np.float64)
+        if getattr(m, "delay_s", 0.0):
+            # the mocap angle stamped t is the link's at t + delay_s (.model.predict): the link's at t
+            # is the one stamped t - delay_s
+            q_rec = np.interp(t - m.delay_s, t, q_rec)
+        q_l = lowpass(q_rec, fs, LINK_HZ)
         q[:, j] = q_l - float(np.mean((q_l - (drive - d_spring))[inner]))
     if not (np.isfinite(q).all() and np.isfinite(v).all() and np.isfinite(a).all()):
         raise InputError(None, "recording", "finite link and motor angles for the robot's context", "NaN")

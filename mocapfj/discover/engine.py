@@ -592,7 +592,11 @@ def _robot_reidentified(robot, signals: dict, nominal: dict, validation, holdout
         if any(isinstance(r, Exception) for r in made.values()):
             break                                       # a joint not identified: no better context
         try:
-            rc = robot_context(robot, signals, {jn: made[jn].base for jn in robot.joints})
+            # the clock is the recording's: the best-determined delay the pass found aligns every link
+            delays = sorted((e["parameters"]["delay_sd_s"], e["parameters"]["delay_s"])
+                            for jn in robot.joints for e in made[jn].effects if e["name"] == "time_delay")
+            delay = delays[0][1] if delays else 0.0
+            rc = robot_context(robot, signals, {jn: made[jn].base.with_(delay_s=delay) for jn in robot.joints})
         except InputError:
             break
         jobs = {jn: (trains[jn], nominal[jn], _train_context(rc, jn, signals[jn], on[jn], holdout))
