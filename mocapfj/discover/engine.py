@@ -40,7 +40,7 @@ from ..ident.conditioning import derivatives, lowpass
 from .effects import EFFECTS, FITTERS, SPRING_EFFECTS, Candidate
 from .context import ROBOT_KEY, robot_context, robot_of
 from .model import simulate_joint
-from .reident import REID_EFFECTS
+from .reident import REID_EFFECTS, robot_reidentified, train_context, train_part
 from .tournament import Judge, pool, score_dict
 from .residuals import Families, families
 
@@ -445,7 +445,7 @@ def _reidentification(jn, s, nominal, current, found, rejected, held_out, on_val
         data, others, where, chain = held_out(jn)
         train = s
     else:
-        data, train, where = segment(s, 1.0 - holdout, 1.0), _train(s, False, holdout), "trial's held-out part"
+        data, train, where = segment(s, 1.0 - holdout, 1.0), train_part(s, False, holdout), "trial's held-out part"
         m = (s.t >= data.t[0]) & (s.t <= data.t[-1])
         others = {k: v[m] for k, v in others_trial.items()}
         chain = [_nominal_sim(nominal, data, others)]
@@ -459,7 +459,7 @@ def _reidentification(jn, s, nominal, current, found, rejected, held_out, on_val
     try:
         if isinstance(made, Exception):
             raise made
-        R = made or (reidentify(train, nominal, _train_context(others_trial.get(ROBOT_KEY), jn, s, on_valid, holdout))
+        R = made or (reidentify(train, nominal, train_context(others_trial.get(ROBOT_KEY), jn, s, on_valid, holdout))
                      if ahead is None else ahead.get(jn))
         oe_base = sim(R.base)
     except (InputError, ReidentificationError, RuntimeError, FloatingPointError, np.linalg.LinAlgError) as e:
@@ -561,101 +561,6 @@ def _reidentification(jn, s, nominal, current, found, rejected, held_out, on_val
     return report
 
 
-ROBOT_PASSES = 2
-"""Re-identifications of a robot's joints: the first in the context the nominal models give, the
-next in the one the previous re-identified models give (:func:`_robot_reidentified`)."""
-
-
-def _robot_reidentified(robot, signals: dict, nominal: dict, validation, holdout: float, ahead, ctx,
-                        parallel: bool) -> dict:
-    """{joint: Reidentified, or the error it raised} of a URDF robot's joints, ROBOT_PASSES passes.
-
-    A joint's context (:mod:`.context`) holds the other links' motion rebuilt from their motors
-    with the nominal J, b and k, so a nominal model that is off biases every joint's
-    re-identification through the others' context (pa10_joints23 case, nominal J -11 %, k +7 %:
-    the elbow's k +4.5 % at 12 SDs, J -6.4 %). Each pass after the first rebuilds the context with
-    the previous pass's models (then +1.0 % and +2.4 %, the same as in the true models' context);
-    its joints run two at a time (one in a worker, :class:`.reident.Ahead`)."""
-    from .reident import Ahead, ReidentificationError, reidentify
-
-    on = {jn: validation is not None and jn in validation for jn in robot.joints}
-    trains = {jn: _train(signals[jn], on[jn], holdout) for jn in robot.joints}
-    caught = (InputError, ReidentificationError, RuntimeError, FloatingPointError, np.linalg.LinAlgError)
-    made = {}
-    for jn in robot.joints:
-        try:
-            made[jn] = (ahead.get(jn) if ahead is not None else
-                        reidentify(trains[jn], nominal[jn], _train_context(ctx, jn, signals[jn], on[jn], holdout)))
-        except caught as e:
-            made[jn] = e
-    for _ in range(ROBOT_PASSES - 1):
-        if any(isinstance(r, Exception) for r in made.values()):
-            break                                       # a joint not identified: no better context
-        try:
-            # the clock is the recording's: the best-determined delay the pass found aligns every link
-            delays = sorted((e["parameters"]["delay_sd_s"], e["parameters"]["delay_s"])
-                            for jn in robot.joints for e in made[jn].effects if e["name"] == "time_delay")
-            delay = delays[0][1] if delays else 0.0
-            rc = robot_context(robot, signals, {jn: made[jn].base.with_(delay_s=delay) for jn in robot.joints})
-        except InputError:
-            break
-        jobs = {jn: (trains[jn], nominal[jn], _train_context(rc, jn, signals[jn], on[jn], holdout))
-                for jn in robot.joints}
-        first, *rest = robot.joints
-        worker = Ahead({first: jobs[first]}, parallel=parallel)
-        nxt = {}
-        try:
-            for jn in rest:
-                try:
-                    nxt[jn] = reidentify(*jobs[jn])
-                except caught as e:
-                    nxt[jn] = e
-            try:
-                nxt[first] = worker.get(first)
-            except caught as e:
-                nxt[first] = e
-        finally:
-            worker.close()
-        for jn, r in nxt.items():
-            if not isinstance(r, Exception):
-                _count_context_shift(r, made[jn])
-        made = nxt
-    return made
-
-
-def _count_context_shift(r, prev) -> None:
-    """Count in each parameter's SD (not remove) how far the last context change moved it: the
-    context is itself an estimate (the others' link motion rebuilt from their motors, the link
-    angle from mocap), and the pass-to-pass shift bounds what its remaining error can move (on a
-    pa10_joints23 control the elbow's J moved +8.8 %, from -6.4 to +2.4 % of the truth, at an SD
-    of 1.3 %). Updates r.parameters in place."""
-    for n, p in r.parameters.items():
-        q = prev.parameters.get(n)
-        if q is None or not (np.isfinite(p["std"]) and np.isfinite(q["value"])):
-            continue
-        p["context_shift"] = float(p["value"] - q["value"])
-        p["std"] = float(np.hypot(p["std"], p["context_shift"]))
-        p["sds"] = float((p["value"] - p["nominal"]) / p["std"]) if p["std"] > 0 else None
-
-
-def _train_context(rc, jn: str, s: JointSignals, on_valid: bool, holdout: float):
-    """A robot's joint's :class:`.context.LinkContext` over what it is re-identified on (:func:`_train`),
-    from the trial's :class:`.context.RobotContext` `rc`; None for a single joint."""
-    from .reident import segment_mask
-
-    if rc is None or jn not in rc.links:
-        return None
-    return rc.of(jn) if on_valid else rc.of(jn)[segment_mask(s, 0.0, 1.0 - holdout)]
-
-
-def _train(s: JointSignals, on_valid: bool, holdout: float) -> JointSignals:
-    """What a joint is re-identified on: the whole trial when a validation recording holds the
-    evidence out, else the trial's first 1 - holdout."""
-    from .reident import segment
-
-    return s if on_valid else segment(s, 0.0, 1.0 - holdout)
-
-
 def discover(signals: dict, models: dict, *, fs_hz: float, validation: dict | None = None, holdout: float = 0.3,
              alpha: float = 1e-10, screen: float = SCREEN, min_explained: float = 0.003, max_effects: int = 3,
              effects=EFFECTS, simulate: bool = True, reidentify: bool = True,
@@ -739,8 +644,8 @@ def reidentification_ahead(signals: dict, models: dict, validation=None, holdout
     jobs = {}
     for jn in signals:
         on_valid = validation is not None and jn in validation
-        jobs[jn] = (_train(signals[jn], on_valid, holdout), models[jn],
-                    _train_context(rc, jn, signals[jn], on_valid, holdout))
+        jobs[jn] = (train_part(signals[jn], on_valid, holdout), models[jn],
+                    train_context(rc, jn, signals[jn], on_valid, holdout))
     with threadpool_limits(1, user_api="blas"):         # the worker inherits it
         ahead = Ahead(jobs, parallel=parallel)
     ahead.key = _ahead_key(signals, models, validation, holdout)
@@ -875,7 +780,7 @@ def _discover(signals: dict, models: dict, ahead, *, parallel: bool = True, fs_h
     if simulate and reidentify:
         # the nominal parameters free: the effects output error fits itself, and the found ones
         # checked against the nominal model re-identified (module .reident)
-        made = (_robot_reidentified(robot, signals, nominal, validation, holdout, ahead, ctx, parallel)
+        made = (robot_reidentified(robot, signals, nominal, validation, holdout, ahead, ctx, parallel)
                 if robot is not None else {})
         for jn in names:
             reidentified[jn] = _reidentification(jn, signals[jn], nominal[jn], current, found, rejected, held_out,
