@@ -35,7 +35,7 @@ from ..errors import InputError
 from .drivetrain import TransmissionError
 from .friction import AsymmetricCoulombViscous, AsymmetricStribeck, CoulombViscous, Stribeck
 from .hysteresis import BoucWen
-from .link_response import substeps
+from .link_response import context_arrays, substeps
 from .springs import Backlash, CubicSpring, LinearSpring, PiecewiseSpring
 
 __all__ = ["link_forward", "encode_friction", "encode_spring"]
@@ -313,14 +313,8 @@ def link_forward(q_m, fs_hz: float, *, I: float, mglx: float, mgly: float, frict
     if fr is None or sp is None:
         raise InputError(None, "friction/spring", "elements link_forward runs (mocapfj.dynamics.link_forward)",
                          f"{type(friction).__name__}, {type(spring).__name__}")
-    if context is None:
-        ctx, cI, cgx, cgy, cex, I_min = False, np.zeros(1), np.zeros(1), np.zeros(1), np.zeros(1), I
-    else:
-        cI, cgx, cgy, cex = (np.ascontiguousarray(a, dtype=np.float64) for a in context)
-        if not all(a.shape == q_m.shape and np.isfinite(a).all() for a in (cI, cgx, cgy, cex)):
-            raise InputError(None, "context", f"four finite {q_m.shape} arrays (inertia, mglx, mgly, torque)",
-                             [a.shape for a in (cI, cgx, cgy, cex)])
-        ctx, I_min = True, float(I + cI.min())
+    (cI, cgx, cgy, cex), I_min = context_arrays(context, q_m.shape, I)
+    ctx = context is not None
     if not (I_min > 0 and math.isfinite(I) and math.isfinite(mglx) and math.isfinite(mgly) and math.isfinite(q0)):
         raise InputError(None, "I, mglx, mgly, q0", "finite numbers, I > 0", (I_min, mglx, mgly, q0))
     kind, P, gap = sp

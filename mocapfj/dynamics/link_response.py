@@ -44,7 +44,7 @@ import numpy as np
 
 from ..errors import InputError
 
-__all__ = ["link_response", "substeps", "N_SENS"]
+__all__ = ["link_response", "substeps", "context_arrays", "N_SENS"]
 
 _KERNEL = None
 N_SENS = 8
@@ -278,7 +278,7 @@ def link_response(q_m, fs_hz: float, *, I: float, mglx: float, mgly: float, c: f
     q_m = np.ascontiguousarray(q_m, dtype=np.float64)
     if q_m.ndim != 1 or q_m.size < 3 or not np.isfinite(q_m).all():
         raise InputError(None, "q_m", "a finite (T,) motor angle with T >= 3", q_m.shape)
-    ctx, I_min = _context_arrays(context, q_m.shape, I)
+    ctx, I_min = context_arrays(context, q_m.shape, I)
     vals = (I_min, k, c, v, eps, mglx, mgly)
     if not (all(math.isfinite(x) for x in vals) and I_min > 0 and k > 0 and c >= 0 and v >= 0 and eps >= 0):
         raise InputError(None, "I, k, c, v, eps", "finite, I > 0, k > 0, c >= 0, v >= 0, eps >= 0", vals[:5])
@@ -305,8 +305,10 @@ def link_response(q_m, fs_hz: float, *, I: float, mglx: float, mgly: float, c: f
 _NO_CONTEXT = tuple(np.zeros(1) for _ in range(4))
 
 
-def _context_arrays(context, shape, I: float) -> tuple[tuple, float]:
-    """(the four context arrays, or one-sample zeros without a context; the least link inertia)."""
+def context_arrays(context, shape, I: float) -> tuple[tuple, float]:
+    """(the four context arrays of a robot's link (:func:`link_response`), or one-sample zeros
+    without a context; the least link inertia I + min(I_t)). InputError unless they are four
+    finite arrays of `shape`."""
     if context is None:
         return _NO_CONTEXT, I
     arrs = tuple(np.ascontiguousarray(a, dtype=np.float64) for a in context)

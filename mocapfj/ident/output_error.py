@@ -57,7 +57,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 from scipy.signal import lfilter, resample_poly
 
-from ..dynamics.link_response import link_response, substeps
+from ..dynamics.link_response import context_arrays, link_response, substeps
 from ..errors import InputError
 from ..types import LSResult
 from .conditioning import check_signals, derivatives, lowpass, noise_floor_sd
@@ -961,10 +961,7 @@ def identify_output_error(t, q, q_m, u, *, fs_hz: float, measured=None, controll
                              f"[{t_c[0]:.4f}, {t_c[-1]:.4f}] s for [{t[0]:.4f}, {t[-1]:.4f}] s")
     ctx_c = None
     if context is not None:
-        context = tuple(np.asarray(a, dtype=np.float64) for a in context)
-        if len(context) != 4 or not all(a.shape == t.shape and np.isfinite(a).all() for a in context):
-            raise InputError(None, "context", f"four finite {t.shape} arrays (inertia, mglx, mgly, torque)",
-                             [np.shape(a) for a in context])
+        context = context_arrays(context, t.shape, 0.0)[0]
         ctx_c = context if t_c is t else tuple(np.interp(t_c, t, a) for a in context)
     I_mean = float(np.mean(context[0])) if context is not None else 0.0
     f_exc = excitation_bandwidth_hz(q_m, fs_hz)
