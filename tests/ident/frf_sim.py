@@ -33,12 +33,16 @@ def plant_frf(f_hz, p, output="motor"):
 
 
 def simulate_multisine(p, ms_list, n_periods, *, kp=None, kd=None, noise_sd=0.0, y_noise_sd=0.0, u_noise_sd=0.0,
-                       seed=0, output="motor"):
+                       seed=0, output="motor", distortion=None):
     """Realisations (one per Multisine of `ms_list`) of n_periods periods each.
 
     Closed loop when kp is given (the multisine is the position reference r, rad), else open loop
     (the multisine is the torque u, N m). noise_sd: SD of the held motor-torque disturbance w, N m;
     y_noise_sd, u_noise_sd: white measurement noise on the logged q_m and u (not fed back).
+    distortion: callable (lines (L,), rng) -> complex amplitudes (L,), N m, of a periodic torque on the
+    motor at every odd line of the multisine's band, excited or not, with the same phase in every
+    period: the stochastic nonlinear distortion of Pintelon and Schoukens (2012, §3.4) as a random-phase
+    multisine meets it (uncorrelated with the excitation, periodic with it, also at the detection lines).
     Returns (u, y, r) each (M, n_periods N), y = q_m (output "motor") or q (output "link").
     """
     A, B = plant_matrices(**p)
@@ -64,6 +68,13 @@ def simulate_multisine(p, ms_list, n_periods, *, kp=None, kd=None, noise_sd=0.0,
         y = np.real(E @ Xc[:, c])
         u = np.real(E @ Uc)
         r = np.real(E.sum(axis=1))
+        if distortion is not None:
+            ld = np.arange(ms.lines.min() | 1, ms.lines.max() + 1, 2)
+            a = distortion(ld, rng)
+            Xd = np.array([np.linalg.solve(2j * np.pi * li * fs / n * np.eye(4) - Acl, B) for li in ld])
+            Ed = np.exp(1j * np.outer(t, 2 * np.pi * ld * fs / n)) * a
+            y = y + np.real(Ed @ Xd[:, c])
+            u = u - np.real(Ed @ (Xd @ K))
         if noise_sd > 0:
             dt = 1 / fs
             Mx = expm(np.block([[Acl, B[:, None]], [np.zeros((1, 5))]]) * dt)

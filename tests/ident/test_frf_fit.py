@@ -4,6 +4,8 @@ closed loop with process noise (tests/ident/frf_sim.py), held parameters, the li
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
@@ -183,3 +185,33 @@ def test_a_noisy_low_band_that_hides_the_shape_with_g_still_starts_from_the_fit_
     u, y, r = simulate_multisine(p, multisine_realisations(ms, 2, seed=1003), 5, kp=100.0, kd=3.0, noise_sd=3.0, seed=3)
     fit = fit_two_inertia(estimate_frf(u, y, FS, 2048, r=r))
     assert abs(fit.value("k") / p["k"] - 1) < 0.03 and fit.params["k"].determined
+
+
+def test_the_fit_weighs_each_line_by_its_nonlinear_distortion_too():
+    """A closed loop whose output carries a stochastic nonlinear distortion 26 dB below it (a periodic
+    torque at every odd line of the band, random phases, falling with frequency: what friction does to a
+    random-phase multisine, Pintelon and Schoukens 2012) and one realisation: the period-to-period noise
+    does not see it, the detection lines do. Weighed by noise and distortion, k is within 1.5 % and
+    its SD covers the error (measured, seeds 40-45: |z| <= 1.2, RMS error 0.5 %); weighed by the noise
+    alone the RMS error was 2.6 times larger (1.4 %) and z up to 2.8."""
+    dist = []
+    for seed in range(40, 46):
+        ms = design_multisine(FS, 2048, 0.5, 12.0, rms=0.01, seed=seed)
+        u, y, r = simulate_multisine(J1, [ms], 4, kp=300.0, kd=30.0, noise_sd=0.5, seed=seed,
+                                     distortion=lambda ln, rng: 0.3 * np.exp(2j * np.pi * rng.random(ln.size))
+                                     / (1 + ln * FS / 2048 / 2.0) ** 2)
+        frf = estimate_frf(u, y, FS, 2048, r=r)
+        assert frf.distortion.odd_detected and np.max(frf.var_nl / frf.var) > 10
+        for weights, F in (("total", frf), ("noise", replace(frf, var_nl=None))):
+            k = fit_two_inertia(F).params["k"]
+            dist.append((weights, k.value / J1["k"] - 1, (k.value - J1["k"]) / k.std))
+    err = {w: np.array([e for w_, e, _ in dist if w_ == w]) for w in ("total", "noise")}
+    z = np.array([z for w, _, z in dist if w == "total"])
+    assert np.all(np.abs(err["total"]) < 0.015) and np.all(np.abs(z) < 3), (err, z)
+    rms = {w: np.sqrt(np.mean(e ** 2)) for w, e in err.items()}
+    assert rms["total"] < 0.6 * rms["noise"], rms
+    # without a distortion nothing is added: a linear loop's weights are its noise's
+    u, y, r = simulate_multisine(J1, [design_multisine(FS, 2048, 0.5, 12.0, rms=0.01, seed=40)], 4, kp=300.0,
+                                 kd=30.0, noise_sd=0.5, seed=40)
+    frf = estimate_frf(u, y, FS, 2048, r=r)
+    assert not frf.distortion.odd_detected and np.count_nonzero(frf.var_nl) <= 0.05 * frf.var_nl.size
