@@ -304,11 +304,7 @@ def estimate_frf(u, y, fs_hz: float, period_samples: int, *, r=None, estimator: 
                              f"{bad * fs_hz / n:.6g} Hz (line {bad}) not excited",
                              hint="a singular input spectrum there: excite it or leave it out")
 
-    Um, Ym = U.mean(axis=1)[:, k], Y.mean(axis=1)[:, k]                       # (M, K)
-    dU, dY = U[:, :, k] - Um[:, None], Y[:, :, k] - Ym[:, None]
-    s_uu = np.sum(np.abs(dU) ** 2, axis=1) / ((P - 1) * P)                  # variances of the period means
-    s_yy = np.sum(np.abs(dY) ** 2, axis=1) / ((P - 1) * P)
-    s_yu = np.sum(dY * dU.conj(), axis=1) / ((P - 1) * P)
+    Um, Ym, v_of = _period_means(U, Y, k)                                    # (M, K)
     au = np.abs(Um)
     weak = au <= 1e-9 * max(au.max(), 1e-300)
     if weak.any():
@@ -317,9 +313,6 @@ def estimate_frf(u, y, fs_hz: float, period_samples: int, *, r=None, estimator: 
                          f"|U| = {au[mi, ki]:.3g} (largest {au.max():.3g}) at "
                          f"{k[ki] * fs_hz / n:.6g} Hz in realisation {mi + 1}",
                          hint="that frequency is not excited (a singular input spectrum): excite it or leave it out")
-
-    def v_of(G):
-        return np.maximum(s_yy + np.abs(G) ** 2 * s_uu - 2 * np.real(np.conj(G) * s_yu), 0.0)
 
     Gm = Ym / Um
     Uall, Yall = U[:, :, k].reshape(M * P, -1), Y[:, :, k].reshape(M * P, -1)
@@ -370,6 +363,22 @@ def estimate_frf(u, y, fs_hz: float, period_samples: int, *, r=None, estimator: 
                distortion=dist, var_nl=var_nl)
 
 
+def _period_means(U, Y, lines):
+    """Period means of U and Y at `lines` (any shape of DFT line indices), and v(G): the variance of
+    Ȳ - G Ū from the period-to-period (co)variances (first order in the noise)."""
+    P = U.shape[1]
+    Um, Ym = U.mean(axis=1)[:, lines], Y.mean(axis=1)[:, lines]
+    dU, dY = U[:, :, lines] - Um[:, None], Y[:, :, lines] - Ym[:, None]
+    s_uu = np.sum(np.abs(dU) ** 2, axis=1) / ((P - 1) * P)                  # variances of the period means
+    s_yy = np.sum(np.abs(dY) ** 2, axis=1) / ((P - 1) * P)
+    s_yu = np.sum(dY * dU.conj(), axis=1) / ((P - 1) * P)
+
+    def v_of(G):
+        return np.maximum(s_yy + np.abs(G) ** 2 * s_uu - 2 * np.real(np.conj(G) * s_yu), 0.0)
+
+    return Um, Ym, v_of
+
+
 def _distortion_variance(U, Y, k, det, G, Um, Rm, estimator, n_near: int = 8) -> np.ndarray | None:
     """Variance of G at the excited lines k from the stochastic nonlinear distortion, estimated at the
     detection lines `det` (Pintelon and Schoukens 2012, §4.3: a random-phase multisine's stochastic
@@ -386,22 +395,16 @@ def _distortion_variance(U, Y, k, det, G, Um, Rm, estimator, n_near: int = 8) ->
     """
     if det.size == 0:
         return None
-    M, P, _ = U.shape
-    Ud, Yd = U[:, :, det].mean(axis=1), Y[:, :, det].mean(axis=1)                 # (M, D)
-    dUd, dYd = U[:, :, det] - Ud[:, None], Y[:, :, det] - Yd[:, None]
-    scale = 1.0 / ((P - 1) * P)
-    s_uu = np.sum(np.abs(dUd) ** 2, axis=1) * scale
-    s_yy = np.sum(np.abs(dYd) ** 2, axis=1) * scale
-    s_yu = np.sum(dYd * dUd.conj(), axis=1) * scale
+    M = U.shape[0]
     same = (det[None, :] % 2) == (k[:, None] % 2)
     if not same.any(axis=1).all():
         same = np.ones_like(same)
     dist = np.where(same, np.abs(det[None, :] - k[:, None]).astype(float), np.inf)          # (K, D)
     near = np.argsort(dist, axis=1)[:, :n_near]
     ok = np.take_along_axis(np.isfinite(dist), near, axis=1)                                # (K, n)
-    Gk = G[:, None]
-    e2 = np.abs(Yd[:, near] - Gk * Ud[:, near]) ** 2                                        # (M, K, n)
-    s2 = np.maximum(s_yy[:, near] + np.abs(Gk) ** 2 * s_uu[:, near] - 2 * np.real(np.conj(Gk) * s_yu[:, near]), 0)
+    Ud, Yd, v_of = _period_means(U, Y, det[near])                                          # (M, K, n)
+    e2 = np.abs(Yd - G[:, None] * Ud) ** 2
+    s2 = v_of(G[:, None])
     e2, s2 = (np.sum(np.where(ok, x, 0.0), axis=2) / np.maximum(ok.sum(axis=1), 1) for x in (e2, s2))
     d = np.where(e2 > DETECTION_RATIO * s2, e2 - s2, 0.0)             # (M, K): only a distortion above the noise
     if estimator == "indirect":
