@@ -92,8 +92,9 @@ class FRF:
     var_total : (K,) or None
         Variance from the spread over realisations (noise and stochastic nonlinear distortion), M >= 2.
     var_nl : (K,) or None
-        Variance from the stochastic nonlinear distortion, estimated at the detection lines (None
-        without them); a fit weighs each line by ``var_fit = var + var_nl``.
+        Variance from the stochastic nonlinear distortion: estimated at the detection lines, and with
+        M >= 2 the excess of `var_total` over `var` where the realisations show one (None with neither);
+        a fit weighs each line by ``var_fit = var + var_nl``.
     coherence : (K,) ordinary coherence of u and y over all M P periods
     lines : (K,) int, DFT lines of one period
     estimator : "h1", "harmonic" or "indirect"
@@ -343,6 +344,9 @@ def estimate_frf(u, y, fs_hz: float, period_samples: int, *, r=None, estimator: 
     det = np.setdiff1d(inside, k)
     var_nl = _distortion_variance(U, Y, k, det, G, Um, R.mean(axis=1)[:, k] if estimator == "indirect" else None,
                                   estimator)
+    if var_total is not None:
+        spread = _spread_excess(var, var_total, Um)
+        var_nl = spread if var_nl is None else np.maximum(var_nl, spread)
     Yd = Y.mean(axis=1)[:, det]
     nd = np.sqrt(np.mean(np.sum(np.abs(Y[:, :, det] - Yd[:, None]) ** 2, axis=1) / ((P - 1) * P), axis=0))
     yd = np.sqrt(np.mean(np.abs(Yd) ** 2, axis=0))
@@ -377,6 +381,25 @@ def _period_means(U, Y, lines):
         return np.maximum(s_yy + np.abs(G) ** 2 * s_uu - 2 * np.real(np.conj(G) * s_yu), 0.0)
 
     return Um, Ym, v_of
+
+
+def _near(n: int, n_near: int) -> np.ndarray:
+    """(n, min(n, n_near)) for each of n lines, the indices of the n_near nearest (itself first)."""
+    i = np.arange(n)
+    return np.argsort(np.abs(i[None, :] - i[:, None]), axis=1, kind="stable")[:, :n_near]
+
+
+def _spread_excess(var, var_total, Um, n_near: int = 8) -> np.ndarray:
+    """The excess of the spread over realisations over the noise, var_total - var, at the excited
+    lines where it is a distortion (the noise alone makes the two equal in expectation): where the
+    mean of var_total |U|^2 over the `n_near` neighbouring excited lines exceeds DETECTION_RATIO times
+    that of var |U|^2 (|U|^2 the input's power, so that what is pooled is the output's, smooth in
+    frequency), else 0. Without that test the spread's few degrees of freedom (M - 1 per line) make
+    the weights of a linear plant noisy."""
+    u2 = np.mean(np.abs(Um) ** 2, axis=0)
+    near = _near(var.size, n_near)
+    pooled_total, pooled_noise = (np.mean((x * u2)[near], axis=1) for x in (var_total, var))
+    return np.where(pooled_total > DETECTION_RATIO * pooled_noise, np.maximum(var_total - var, 0.0), 0.0)
 
 
 def _distortion_variance(U, Y, k, det, G, Um, Rm, estimator, n_near: int = 8) -> np.ndarray | None:

@@ -215,3 +215,26 @@ def test_the_fit_weighs_each_line_by_its_nonlinear_distortion_too():
                                  kd=30.0, noise_sd=0.5, seed=40)
     frf = estimate_frf(u, y, FS, 2048, r=r)
     assert not frf.distortion.odd_detected and np.count_nonzero(frf.var_nl) <= 0.05 * frf.var_nl.size
+
+
+def test_without_detection_lines_the_spread_over_realisations_weighs_the_distortion():
+    """A full random-phase multisine (no detection lines), 4 realisations, the same kind of distortion
+    (26 dB below the output, new phases in each realisation): where the spread of the realisations'
+    FRFs exceeds 4x their noise, the fit weighs by it. Measured on seeds 80-85: k RMS error 0.13 %
+    and z within 2.0, against 0.89 % and z up to 6.2 by the noise alone (its SDs 3x too small)."""
+    err, z = {"total": [], "noise": []}, {"total": [], "noise": []}
+    for seed in range(80, 86):
+        ms = design_multisine(FS, 2048, 0.5, 12.0, rms=0.01, seed=seed, kind="random")
+        u, y, r = simulate_multisine(J1, multisine_realisations(ms, 4, seed=100 + seed), 4, kp=300.0, kd=30.0,
+                                     noise_sd=0.5, seed=seed,
+                                     distortion=lambda ln, rng: 0.3 * np.exp(2j * np.pi * rng.random(ln.size))
+                                     / (1 + ln * FS / 2048 / 2.0) ** 2)
+        frf = estimate_frf(u, y, FS, 2048, r=r)
+        assert frf.distortion.f_odd_hz.size == 0 and np.max(frf.var_nl / frf.var) > 10
+        for weights, F in (("total", frf), ("noise", replace(frf, var_nl=None))):
+            k = fit_two_inertia(F).params["k"]
+            err[weights].append(k.value / J1["k"] - 1)
+            z[weights].append((k.value - J1["k"]) / k.std)
+    rms = {w: np.sqrt(np.mean(np.square(e))) for w, e in err.items()}
+    assert np.all(np.abs(z["total"]) < 3) and rms["total"] < 0.005, (err, z)
+    assert rms["total"] < 0.5 * rms["noise"], rms
