@@ -175,7 +175,7 @@ def calibration(seeds):
               f"{np.mean(chis):.2f} |")
 
 
-def assist(n_real=5, periods=3):
+def assist(n_real=5, periods=3, joints=(("assist_j1", 0.5), ("assist_j2", 0.1))):
     from mocapfj.dynamics import CoulombViscous, LinearSpring, SingleJoint
     from mocapfj.dynamics.simulate import PID, controller_log, simulate
     from mocapfj.synth.scenario import reference_trajectory
@@ -186,7 +186,7 @@ def assist(n_real=5, periods=3):
           "| zeta_a | zeta_r | true modes (Hz) | sim s |")
     print("|---|---|---|---|---|---|---|---|---|---|---|---|")
     N = 4096
-    for name, noise in (("assist_j1", 0.5), ("assist_j2", 0.1)):
+    for name, noise in joints:
         p, fmax, kp, kd = JOINTS[name]
         model = SingleJoint(I=p["I"], J=p["J"], spring=LinearSpring(p["k"]), b=p["b"], d=p["d"],
                             friction=CoulombViscous(0.0, p["v"]))
