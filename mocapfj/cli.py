@@ -880,8 +880,9 @@ def build_parser() -> argparse.ArgumentParser:
     fr.add_argument("--transient", default="auto",
                     help="periods dropped at the start of each realisation (default auto: those that differ "
                          "from the late periods beyond the noise, at least 1)")
-    fr.add_argument("--realisations", type=int, default=1,
-                    help="the record holds this many equal consecutive realisations (default 1)")
+    fr.add_argument("--realisations", default="auto",
+                    help="the record holds this many equal consecutive realisations (default auto: a new one "
+                         "starts where a period differs from the one before as an independent multisine does)")
     fr.add_argument("--compare", default=None, metavar="IDENTIFY",
                     help="the time-domain identification of the same joint (identify.json, its directory or a run "
                          "directory): the two-inertia parameters and modes held against it, disagreements named")

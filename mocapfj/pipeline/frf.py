@@ -86,14 +86,60 @@ def find_period(x, *, exact: bool) -> int | None:
     return int(L[hit[0]]) if hit.size else None
 
 
+NEW_REALISATION = 0.5
+"""A period whose mean squared change from the one before exceeds this share of 2 var(x) starts a new
+realisation (an independent multisine changes by about 1; one period of a realisation to the next, by
+its noise and transient only)."""
+
+
+def find_realisations(x, n: int) -> int | None:
+    """How many equal consecutive realisations of period n samples the record x holds: the periods
+    where x changes from the period before by more than NEW_REALISATION start one. 1 when none does;
+    None when they do at unequal spacing (not equal realisations)."""
+    x = np.asarray(x, dtype=np.float64)
+    P = x.size // n
+    if P < 2 or not x.var() > 0:
+        return 1
+    blocks = x[: P * n].reshape(P, n)
+    change = np.mean(np.diff(blocks, axis=0) ** 2, axis=1) / (2 * x.var())
+    starts = np.flatnonzero(change > NEW_REALISATION) + 1
+    if starts.size == 0:
+        return 1
+    edges = np.r_[0, starts, P]
+    lengths = np.diff(edges)
+    if np.all(lengths == lengths[0]) and P * n >= x.size - n:
+        return int(lengths.size)
+    return None
+
+
+def find_period_and_realisations(x, *, exact: bool) -> tuple[int | None, int]:
+    """(period in samples, realisations) of a record of equal consecutive realisations of a periodic
+    excitation: the period where the whole record repeats (:func:`find_period`), split at the periods
+    where a new realisation starts; when the realisations' changes hide the period from the whole
+    record, the period of its first 1/m (m = 2..8) that splits the record into exactly m."""
+    n = find_period(x, exact=exact)
+    if n is not None:
+        m = find_realisations(x, n)
+        if m is not None:
+            return n, m
+    x = np.asarray(x, dtype=np.float64)
+    for m in range(2, 9):
+        part = x[: x.size // m]
+        n_m = find_period(part, exact=exact)
+        if n_m is not None and part.size % n_m == 0 and find_realisations(x, n_m) == m:
+            return n_m, m
+    return n, 1
+
+
 def run_frf(path, out, *, input: str, output: str, reference: str | None = None, time: str | None = None,
-            period_s: float | None = None, model: str = "two_inertia", transient="auto", realisations: int = 1,
+            period_s: float | None = None, model: str = "two_inertia", transient="auto", realisations="auto",
             estimator: str = "auto", single_record: bool = False, order=None, steady_period: bool = False,
             compare=None, joint: str | None = None, gravity_stiffness: float | None = None) -> dict:
     """``mocapfj frf``: the FRF of column `output` over column `input` (Makarov et al. 2012, eq. 23-27),
     and the two-inertia model fitted to it with its modes.
 
-    The record holds `realisations` equal consecutive parts, each starting with `transient` periods
+    The record holds `realisations` equal consecutive parts ("auto": :func:`find_period_and_realisations`,
+    or :func:`find_realisations` with `period_s`), each starting with `transient` periods
     that are dropped ("auto": :func:`mocapfj.ident.frf.transient_count`). The period comes from `period_s` or, without it, from where the reference
     (else the input) repeats. `single_record`: the record is one period or not periodic at all, the FRF
     comes from :func:`mocapfj.ident.frf_single.estimate_frf_lpm` (the noise from the record's own
@@ -125,8 +171,13 @@ def run_frf(path, out, *, input: str, output: str, reference: str | None = None,
             raise InputError(None, "transient", "a whole number >= 0 or auto", transient) from None
     if transient != "auto" and (int(transient) != transient or transient < 0):
         raise InputError(None, "transient", "a whole number >= 0 or auto", transient)
-    if int(realisations) != realisations or realisations < 1:
-        raise InputError(None, "realisations", "a whole number >= 1", realisations)
+    if isinstance(realisations, str) and realisations != "auto":
+        try:
+            realisations = int(realisations)
+        except ValueError:
+            raise InputError(None, "realisations", "a whole number >= 1 or auto", realisations) from None
+    if realisations != "auto" and (int(realisations) != realisations or realisations < 1):
+        raise InputError(None, "realisations", "a whole number >= 1 or auto", realisations)
     if steady_period and not single_record:
         raise InputError(None, "steady-period", "only with --single-record", True)
     if order is not None and model != "rational":
@@ -145,7 +196,11 @@ def run_frf(path, out, *, input: str, output: str, reference: str | None = None,
     fs = (t.size - 1) / float(t[-1] - t[0])
     src = cols.get("--reference", cols["--input"])
     if period_s is None:
-        n = find_period(src, exact="--reference" in cols)
+        exact = "--reference" in cols
+        if realisations == "auto":
+            n, realisations = find_period_and_realisations(src, exact=exact)
+        else:
+            n = find_period(src[: src.size // int(realisations)], exact=exact)      # one realisation's
         if n is None:
             raise InputError(csv, "--reference" if "--reference" in cols else "--input",
                              "a periodic signal (the period found from where it repeats)", "no period found",
@@ -157,6 +212,8 @@ def run_frf(path, out, *, input: str, output: str, reference: str | None = None,
         if n < 8 or abs(n - period_s * fs) > 1e-3 * n:
             raise InputError(None, "period", f"a whole number (>= 8) of sampling steps of {1 / fs:.6g} s",
                              f"{period_s} s = {period_s * fs:.6g} steps")
+        if realisations == "auto":
+            realisations = find_realisations(src, n) or 1
     T = t.size // int(realisations)
 
     def parts(x):
