@@ -94,8 +94,9 @@ its noise and transient only)."""
 
 def find_realisations(x, n: int) -> int | None:
     """How many equal consecutive realisations of period n samples the record x holds: the periods
-    where x changes from the period before by more than NEW_REALISATION start one. 1 when none does;
-    None when they do at unequal spacing (not equal realisations)."""
+    where x changes from the period before by more than NEW_REALISATION start one (but a period right
+    after a start: the transient's). 1 when none does; None when they do at unequal spacing (not
+    equal realisations)."""
     x = np.asarray(x, dtype=np.float64)
     P = x.size // n
     if P < 2 or not x.var() > 0:
@@ -103,6 +104,9 @@ def find_realisations(x, n: int) -> int | None:
     blocks = x[: P * n].reshape(P, n)
     change = np.mean(np.diff(blocks, axis=0) ** 2, axis=1) / (2 * x.var())
     starts = np.flatnonzero(change > NEW_REALISATION) + 1
+    # a realisation's transient (a ramp into the multisine) changes its second period from its first
+    # as well: a start right after a start (or after the record's) belongs to the realisation before
+    starts = starts[~np.isin(starts - 1, np.r_[0, starts])]
     if starts.size == 0:
         return 1
     edges = np.r_[0, starts, P]

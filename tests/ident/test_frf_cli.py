@@ -218,3 +218,19 @@ def test_realisations_one_after_another_are_found(tmp_path, capsys, with_referen
     assert s["period_samples"] == 2048 and s["frf"]["n_realisations"] == 4
     assert abs(s["model"]["params"]["k"]["value"] / P["k"] - 1) < 0.001
     assert s["frf"]["noise_total"] is not None                     # the spread over the realisations
+
+
+def test_realisations_that_each_ramp_in_are_counted_once():
+    """Three realisations, each ramping into its multisine over 2 s of a 5.12 s period (as
+    mocapfj.synth's references do): the ramp's period is the realisation's transient, not a fourth
+    realisation; one ramped realisation alone is one."""
+    from mocapfj.ident.multisine import multisine_realisations
+    from mocapfj.pipeline.frf import find_period_and_realisations
+
+    ms = design_multisine(200.0, 1024, 0.5, 20.0, rms=0.01, seed=2)
+    t = np.arange(4 * 1024) / 200.0
+    parts = [0.3 + np.clip(t / 2.0, 0, 1) * (m.amplitudes * np.cos(2 * np.pi * np.outer(t, m.lines * 200.0 / 1024)
+                                                                     + m.phases)).sum(axis=1)
+             for m in multisine_realisations(ms, 3, seed=9)]
+    assert find_period_and_realisations(np.concatenate(parts), exact=True) == (1024, 3)
+    assert find_period_and_realisations(parts[0], exact=True) == (1024, 1)
