@@ -604,6 +604,7 @@ def _cmd_frf(args) -> int:
             for md in s["modes"]:
                 lines.append(f"  {md['kind']} {md['f_hz']:.4g} +- {md['f_hz_std']:.2g} Hz, zeta {md['zeta']:.3g} +- "
                              f"{md['zeta_std']:.2g}")
+        lines += [f"  note: {n}" for n in s.get("notes", [])]
         c = s.get("comparison")
         if c:
             lines.append(f"  against the time-domain identification of {c['joint']} ({c['source']}): {c['verdict']}")

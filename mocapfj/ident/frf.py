@@ -91,6 +91,9 @@ class FRF:
     var : (K,) noise variance E|G_hat - G|^2 from the period-to-period spread
     var_total : (K,) or None
         Variance from the spread over realisations (noise and stochastic nonlinear distortion), M >= 2.
+    feedback : dict or None
+        Without a reference: whether the noise in the input follows the output's as a feedback loop's
+        does (:func:`feedback_evidence`); None with a reference.
     var_nl : (K,) or None
         Variance from the stochastic nonlinear distortion: estimated at the detection lines, and with
         M >= 2 the excess of `var_total` over `var` where the realisations show one (None with neither);
@@ -118,6 +121,7 @@ class FRF:
     closed_loop: bool
     distortion: Distortion
     var_nl: np.ndarray | None = None
+    feedback: dict | None = None
 
     @property
     def magnitude(self) -> np.ndarray:
@@ -147,7 +151,7 @@ class FRF:
                 "real": self.G.real, "imag": self.G.imag, "coherence": self.coherence, "noise": self.std,
                 "noise_total": None if self.var_total is None else np.sqrt(self.var_total),
                 "distortion_std": None if self.var_nl is None else np.sqrt(self.var_nl),
-                "distortion": self.distortion.to_dict()}
+                "distortion": self.distortion.to_dict(), "feedback": self.feedback}
 
 
 SML_MIN_REALISATIONS = 4
@@ -369,7 +373,41 @@ def estimate_frf(u, y, fs_hz: float, period_samples: int, *, r=None, estimator: 
                       noise_db=db(nd), even_detected=detected(ev), odd_detected=detected(od))
     return FRF(f_hz=k * fs_hz / n, G=G, var=var, var_total=var_total, coherence=coh, lines=k, estimator=estimator,
                n_periods=P, n_realisations=M, fs_hz=float(fs_hz), n_samples=n, closed_loop=R is not None,
-               distortion=dist, var_nl=var_nl)
+               distortion=dist, var_nl=var_nl, feedback=None if R is not None else feedback_evidence(U, Y, k, G))
+
+
+FEEDBACK_P = 1e-3
+"""The chance with which the noise of an open loop's input and output would look coherent at a line."""
+
+FEEDBACK_CHANCE = 1e-4
+"""The chance below which so many coherent lines are not independent noise's."""
+
+
+def feedback_evidence(U, Y, k, G) -> dict:
+    """Whether the record's noise says it was taken in closed loop, from its period-to-period
+    fluctuations at the excited lines k: where those of the input and the output are coherent
+    (beyond what independent noise gives with probability FEEDBACK_P at M (P - 1) degrees of
+    freedom), their ratio is the system's (G) when the noise enters before the input is measured in
+    open loop, and the controller's (-1 / C) in closed loop. ``suspected`` when more lines are
+    coherent than independent noise makes with probability FEEDBACK_CHANCE (binomial, FEEDBACK_P per
+    line) and the ratio there differs from G by more than half of |G| at the median: then
+    without the reference the FRF is biased towards -1 / C. Noise that enters after the controller
+    (the measurements' own) says nothing either way."""
+    from scipy.stats import binom
+
+    M, P, _ = U.shape
+    nu = M * (P - 1)
+    dU, dY = U[:, :, k] - U[:, :, k].mean(axis=1, keepdims=True), Y[:, :, k] - Y[:, :, k].mean(axis=1, keepdims=True)
+    s_uu, s_yy = np.sum(np.abs(dU) ** 2, axis=(0, 1)), np.sum(np.abs(dY) ** 2, axis=(0, 1))
+    s_yu = np.sum(dY * dU.conj(), axis=(0, 1))
+    coh = np.abs(s_yu) ** 2 / np.maximum(s_uu * s_yy, 1e-300)
+    limit = 1.0 - FEEDBACK_P ** (1.0 / max(nu - 1, 1))
+    coherent = coh > limit
+    mismatch = np.abs(s_yu / np.maximum(s_uu, 1e-300) - G) / np.maximum(np.abs(G), 1e-300)
+    med = float(np.median(mismatch[coherent])) if coherent.any() else None
+    return {"coherent_lines": int(coherent.sum()), "lines": int(coherent.size), "median_mismatch": med,
+            "suspected": bool(med is not None and med > 0.5
+                              and binom.sf(int(coherent.sum()) - 1, coherent.size, FEEDBACK_P) < FEEDBACK_CHANCE)}
 
 
 def _period_means(U, Y, lines):

@@ -243,11 +243,38 @@ def run_frf(path, out, *, input: str, output: str, reference: str | None = None,
                "transient_periods": T // n - frf.n_periods if T // n >= frf.n_periods else None, "frf": frf.to_dict(),
                "model": None if fit is None else fit.to_dict(),
                "modes": [] if fit is None else [m.to_dict() for m in fit.modes],
+               "notes": frf_notes(frf, fit, gravity_fitted=gravity_stiffness is None),
                "files": {"summary": "frf.json", "frf": "frf.csv"}}
     if reference_ident is not None and fit is not None:
         summary["comparison"] = compare_with_identify(summary, *reference_ident)
     _write(out, summary, frf, fit)
     return summary
+
+
+def frf_notes(frf, fit, *, gravity_fitted: bool) -> list[str]:
+    """What the numbers of an FRF and its fit leave unsaid (run_frf's ``notes``): a closed loop run
+    without its reference, SDs that cannot hold a nonlinear distortion, a gravity stiffness that a
+    distortion may have made."""
+    notes = []
+    fb = frf.feedback
+    if fb and fb["suspected"]:
+        notes.append(f"the input's noise follows the output's as a feedback loop's does ({fb['coherent_lines']} of "
+                     f"{fb['lines']} lines coherent, their ratio {100 * fb['median_mismatch']:.0f} % from the FRF): "
+                     "a closed loop, whose FRF without its reference is biased towards the controller's inverse; "
+                     "pass --reference")
+    distorted = frf.var_nl is not None and bool(np.any(frf.var_nl > 0))
+    if frf.var_nl is None and fit is not None and fit.chi2_red > 3.0:
+        notes.append(f"chi2/dof {fit.chi2_red:.3g} and no estimate of a nonlinear distortion (no detection lines, "
+                     "one realisation): the SDs are the noise's scaled by the chi-square, and leave out a "
+                     "distortion that varies over frequency (an odd multisine with detection lines, or "
+                     "several realisations, measures it)")
+    if (gravity_fitted and distorted and fit is not None
+            and abs(fit.gravity_stiffness) > 3 * fit.gravity_stiffness_std):
+        notes.append(f"the fitted gravity stiffness ({fit.gravity_stiffness:.4g} +- {fit.gravity_stiffness_std:.2g} "
+                     "N m/rad) rests on the lowest lines, where the record shows a nonlinear distortion: a "
+                     "friction's best linear approximation there is read as stiffness too; hold it with "
+                     "--gravity-stiffness (0 without gravity, or the rigid model's) if it is known")
+    return notes
 
 
 def _gravity_stiffness(given, reference_ident, y) -> dict:

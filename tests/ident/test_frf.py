@@ -142,3 +142,23 @@ def test_bad_input():
     bad[0, 5] = np.nan
     with pytest.raises(InputError, match="finite"):
         estimate_frf(bad, y, FS, ms.n_samples)
+
+
+def test_a_closed_loop_run_without_its_reference_is_told_from_its_noise():
+    """The period-to-period noise of a closed loop's input follows its output's with the ratio
+    -1 / C, not G: without the reference that is said (frf_notes), from 5 coherent lines on; an open
+    loop whose input carries the noise into the plant has the ratio G, and nothing is said; nor when
+    the noise is the sensors' own (it is not fed back, and biases nothing)."""
+    from mocapfj.pipeline.frf import frf_notes
+
+    cases = {"closed, fed-back torque noise": (dict(kp=300.0, kd=30.0, noise_sd=1.0), 0.01, True),
+             "closed, sensor noise": (dict(kp=300.0, kd=30.0, y_noise_sd=1e-5, u_noise_sd=0.05), 0.01, False),
+             "open, torque noise into the plant": (dict(noise_sd=1.0), 1.0, False)}
+    for name, (kw, rms, fed_back) in cases.items():
+        ms = design_multisine(FS, 1024, 0.5, 12.0, rms=rms, seed=5)
+        u, y, r = simulate_multisine(P_J1, [ms], 5, seed=6, **kw)
+        F = estimate_frf(u, y, FS, 1024)
+        assert F.feedback["suspected"] is fed_back, (name, F.feedback)
+        said = any("feedback loop" in n for n in frf_notes(F, None, gravity_fitted=False))
+        assert said is fed_back, name
+        assert estimate_frf(u, y, FS, 1024, r=r).feedback is None        # with the reference: nothing to tell
