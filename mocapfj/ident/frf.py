@@ -140,7 +140,7 @@ class FRF:
     @property
     def var_fit(self) -> np.ndarray:
         """(K,) the variance a model fit weighs line k by: the noise's and the stochastic nonlinear
-        distortion's (`var_nl`, when the excitation has detection lines)."""
+        distortion's (`var_nl`, when detection lines or realisations measure it)."""
         return self.var if self.var_nl is None else self.var + self.var_nl
 
     def to_dict(self) -> dict:
@@ -314,7 +314,11 @@ def estimate_frf(u, y, fs_hz: float, period_samples: int, *, r=None, estimator: 
                              f"{bad * fs_hz / n:.6g} Hz (line {bad}) not excited",
                              hint="a singular input spectrum there: excite it or leave it out")
 
-    Um, Ym, v_of = _period_means(U, Y, k)                                    # (M, K)
+    Um, Ym, *cov = _period_stats(U, Y, k)                                    # (M, K)
+
+    def v_of(G):
+        return _residual_var(G, *cov)
+
     au = np.abs(Um)
     weak = au <= 1e-9 * max(au.max(), 1e-300)
     if weak.any():
@@ -397,9 +401,7 @@ def feedback_evidence(U, Y, k, G) -> dict:
 
     M, P, _ = U.shape
     nu = M * (P - 1)
-    dU, dY = U[:, :, k] - U[:, :, k].mean(axis=1, keepdims=True), Y[:, :, k] - Y[:, :, k].mean(axis=1, keepdims=True)
-    s_uu, s_yy = np.sum(np.abs(dU) ** 2, axis=(0, 1)), np.sum(np.abs(dY) ** 2, axis=(0, 1))
-    s_yu = np.sum(dY * dU.conj(), axis=(0, 1))
+    s_uu, s_yy, s_yu = (x.sum(axis=0) for x in _period_stats(U, Y, k)[2:])     # over the realisations
     coh = np.abs(s_yu) ** 2 / np.maximum(s_uu * s_yy, 1e-300)
     limit = 1.0 - FEEDBACK_P ** (1.0 / max(nu - 1, 1))
     coherent = coh > limit
@@ -410,20 +412,21 @@ def feedback_evidence(U, Y, k, G) -> dict:
                               and binom.sf(int(coherent.sum()) - 1, coherent.size, FEEDBACK_P) < FEEDBACK_CHANCE)}
 
 
-def _period_means(U, Y, lines):
-    """Period means of U and Y at `lines` (any shape of DFT line indices), and v(G): the variance of
-    Ȳ - G Ū from the period-to-period (co)variances (first order in the noise)."""
+def _period_stats(U, Y, lines):
+    """Period means Ū, Ȳ of U and Y at `lines` (any shape of DFT line indices) per realisation, and
+    the (co)variances s_uu, s_yy, s_yu of those means from the period-to-period spread."""
     P = U.shape[1]
     Um, Ym = U.mean(axis=1)[:, lines], Y.mean(axis=1)[:, lines]
     dU, dY = U[:, :, lines] - Um[:, None], Y[:, :, lines] - Ym[:, None]
-    s_uu = np.sum(np.abs(dU) ** 2, axis=1) / ((P - 1) * P)                  # variances of the period means
+    s_uu = np.sum(np.abs(dU) ** 2, axis=1) / ((P - 1) * P)
     s_yy = np.sum(np.abs(dY) ** 2, axis=1) / ((P - 1) * P)
     s_yu = np.sum(dY * dU.conj(), axis=1) / ((P - 1) * P)
+    return Um, Ym, s_uu, s_yy, s_yu
 
-    def v_of(G):
-        return np.maximum(s_yy + np.abs(G) ** 2 * s_uu - 2 * np.real(np.conj(G) * s_yu), 0.0)
 
-    return Um, Ym, v_of
+def _residual_var(G, s_uu, s_yy, s_yu):
+    """The variance of Ȳ - G Ū (first order in the noise)."""
+    return np.maximum(s_yy + np.abs(G) ** 2 * s_uu - 2 * np.real(np.conj(G) * s_yu), 0.0)
 
 
 def _near(n: int, n_near: int) -> np.ndarray:
@@ -473,9 +476,9 @@ def _distortion_variance(U, Y, k, det, G, Um, Rm, estimator, n_near: int = 8) ->
     dist = np.where(same, np.abs(det[None, :] - k[:, None]).astype(float), np.inf)          # (K, D)
     near = np.argsort(dist, axis=1)[:, :n_near]
     ok = np.take_along_axis(np.isfinite(dist), near, axis=1)                                # (K, n)
-    Ud, Yd, v_of = _period_means(U, Y, det[near])                                          # (M, K, n)
+    Ud, Yd, *cov = _period_stats(U, Y, det[near])                                          # (M, K, n)
     e2 = np.abs(Yd - G[:, None] * Ud) ** 2
-    s2 = v_of(G[:, None])
+    s2 = _residual_var(G[:, None], *cov)
     e2, s2 = (np.sum(np.where(ok, x, 0.0), axis=2) / np.maximum(ok.sum(axis=1), 1) for x in (e2, s2))
     d = np.where(e2 > DETECTION_RATIO * s2, e2 - s2, 0.0)             # (M, K): only a distortion above the noise
     if estimator == "indirect":
