@@ -599,8 +599,10 @@ def _cmd_frf(args) -> int:
             if "g_Nm_per_rad" in g:
                 lines.append(f"  gravity stiffness {g['g_Nm_per_rad']:.4g} +- {g.get('g_std_Nm_per_rad', 0):.2g} N m/rad "
                              f"({g.get('share_of_k_pct', 0):+.2f} % of k), {g['source']}")
-            lines.append(f"  {m['name']}: " + ", ".join(f"{n} {p['value']:.4g} +- {p['std']:.2g}" for n, p in m["params"].items())
-                         + f" (chi2/dof {m['chi2_red']:.2f})")
+            # a parameter at its bound (0) prints as 0, not as the optimiser's 1e-31
+            lines.append(f"  {m['name']}: " + ", ".join(
+                f"{n} {p['value'] if abs(p['value']) > 1e-9 * p['std'] else 0.0:.4g} +- {p['std']:.2g}"
+                for n, p in m["params"].items()) + f" (chi2/dof {m['chi2_red']:.2f})")
             for md in s["modes"]:
                 lines.append(f"  {md['kind']} {md['f_hz']:.4g} +- {md['f_hz_std']:.2g} Hz, zeta {md['zeta']:.3g} +- "
                              f"{md['zeta_std']:.2g}")
