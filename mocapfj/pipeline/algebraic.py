@@ -42,11 +42,15 @@ def run_algebraic(csv, out: str | Path, output: str, input: str | None = None, t
                   offset: bool = True, inertia: float | None = None, damping: str = "auto") -> dict:
     """``mocapfj algebraic``: omega0 and zeta of a joint's oscillation in the segment
     [start, start + duration] of a CSV, by the algebraic estimator and (for a free vibration) the
-    logarithmic decrement; with `window` also over sliding windows of the whole record.
+    logarithmic decrement; with `window` also over sliding windows of that segment.
 
-    Writes OUT/algebraic.json (the summary) and, with `window`, OUT/sliding.csv (t_end, omega0,
-    omega0_std, zeta, zeta_std per window).
+    Either estimate may fail where the other holds (the algebraic one is for a fraction of a period to
+    a few periods, the decrement needs 1.5 periods or more): the one that fails is reported with its
+    reason; only when every estimate fails is it an error. Writes OUT/algebraic.json (the summary) and,
+    with `window`, OUT/sliding.csv (t_end, omega0, omega0_std, zeta, zeta_std per window).
     """
+    if inertia is not None and not (math.isfinite(inertia) and inertia > 0):
+        raise InputError(None, "inertia", "a positive link inertia in kg m^2", inertia)
     from ..ident.algebraic import algebraic_estimate, algebraic_sliding
     from ..ident.decrement import log_decrement
 
@@ -61,36 +65,46 @@ def run_algebraic(csv, out: str | Path, output: str, input: str | None = None, t
     for name, x in ((time, t), (output, y)) + (() if u is None else ((input, u),)):
         _finite(csv, name, x)
     joint: dict = {"name": output, "input": input, "segment_s": [float(t[0]), float(t[-1])]}
+    estimates = {}
+    failed = None
     try:
         a = algebraic_estimate(t, y, u, offset=offset, damping=damping)
+        estimates["algebraic"] = a
+        joint["algebraic"] = a.to_dict()
+        if a.link_reversals:
+            joint["note"] = (f"the link reverses {a.link_reversals} time(s) in the segment: with Coulomb friction zeta is "
+                             "the transient's equivalent viscous damping (a velocity change without reversal avoids it)")
     except InputError as e:
-        raise InputError(csv, f"column {output!r} ({e.field})", e.expected, e.got, e.hint) from None
-    joint["algebraic"] = a.to_dict()
-    if a.link_reversals:
-        joint["note"] = (f"the link reverses {a.link_reversals} time(s) in the segment: with Coulomb friction zeta is the "
-                         "transient's equivalent viscous damping (a velocity change without reversal avoids it)")
-    estimates = [a]
+        failed = InputError(csv, f"column {output!r} ({e.field})", e.expected, e.got, e.hint)
+        joint["algebraic"] = {"error": str(failed).split(": ", 2)[-1]}
     if u is None:
         try:
             ld = log_decrement(t, y)
+            estimates["log_decrement"] = ld
             joint["log_decrement"] = ld.to_dict()
-            estimates.append(ld)
-            dz = (a.zeta - ld.zeta) / math.hypot(a.zeta_std, ld.zeta_std)
-            dw = (a.omega0 - ld.omega0) / math.hypot(a.omega0_std, ld.omega0_std)
-            joint["agreement_sd"] = {"omega0": dw, "zeta": dz}
-            joint["agree"] = bool(abs(dw) < 3 and abs(dz) < 3)
         except InputError as e:
             joint["log_decrement"] = {"error": str(e).split(": ", 2)[-1]}
+    if not estimates:
+        raise failed
+    if len(estimates) == 2:
+        a, ld = estimates["algebraic"], estimates["log_decrement"]
+        dz = (a.zeta - ld.zeta) / math.hypot(a.zeta_std, ld.zeta_std)
+        dw = (a.omega0 - ld.omega0) / math.hypot(a.omega0_std, ld.omega0_std)
+        joint["agreement_sd"] = {"omega0": dw, "zeta": dz}
+        joint["agree"] = bool(abs(dw) < 3 and abs(dz) < 3)
+    elif failed is not None:
+        joint["note"] = ("the algebraic estimate failed on this segment (it is for a fraction of a period to a few "
+                         "periods: --duration shorter), the logarithmic decrement holds")
     if inertia is not None:
-        for e, key in zip(estimates, ("algebraic", "log_decrement")):
+        for key, e in estimates.items():
             k, k_std = e.stiffness(inertia)
             joint[key]["stiffness"] = k
             joint[key]["stiffness_std"] = k_std
             joint[key]["damping_coefficient"] = 2 * e.zeta * math.sqrt(k * inertia)
     if window is not None:
-        for name, x in ((time, t_all), (output, y_all)) + (() if u_all is None else ((input, u_all),)):
-            _finite(csv, name, x)
-        s = algebraic_sliding(t_all, y_all, u_all, window_s=window, offset=offset, damping=a.damping)
+        # without an input the two damping forms are one
+        chosen = estimates["algebraic"].damping if "algebraic" in estimates else "link"
+        s = algebraic_sliding(t, y, u, window_s=window, offset=offset, damping=chosen)
         joint["sliding"] = s.to_dict()
         write_csv_columns(out / "sliding.csv", {"t_end": s.t_end, "omega0": s.omega0, "omega0_std": s.omega0_std,
                                                 "zeta": s.zeta, "zeta_std": s.zeta_std})
