@@ -557,6 +557,7 @@ def _cmd_clamped(args) -> int:
                                  f"|W chi - Y| / |Y| {f['rel_error_pct']:.3g} %")
             if "rel_diff_pct" in j:
                 lines.append(f"  {j['name']}: the two differ by {j['rel_diff_pct']:.3g} % ({j['diff_sd']:.1f} SD)")
+        lines += [f"  note: {n}" for n in s.get("notes", [])]
         lines.append(f"  wrote {args.out}/clamped.json, table.md")
         return "\n".join(lines)
 

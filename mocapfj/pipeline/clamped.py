@@ -27,6 +27,31 @@ def _names(arg: str, what: str) -> list[str]:
     return names
 
 
+MISFIT_PCT = 10.0
+"""|W chi - Y| / |Y| above which the joint's torques are not k q_m + offset: the model is said to be off."""
+
+
+def clamped_notes(res) -> list[str]:
+    """What the numbers leave unsaid: a stiffness that is not positive (a wrench read with the other
+    sign: the tool's on the environment is asked for), and a fit the torques do not follow (a wrench
+    in another frame, a tool offset the model lacks, an unclamped end effector)."""
+    notes = []
+    for r in res:
+        for f in (r.motor, r.wrench):
+            if f is None:
+                continue
+            what = f"{r.name} by {f.source.replace('_', ' ')}"
+            if not f.k > 0:
+                notes.append(f"{what}: k {f.k:.4g} N m/rad is not a stiffness"
+                             + (" (the wrench's sign: --wrench is the one the tool applies to the environment)"
+                                if f.source == "wrench" else " (the motor angle's or the torque's sign)"))
+            if f.rel_error_pct > MISFIT_PCT:
+                notes.append(f"{what}: the torques do not follow k q_m + offset (|W chi - Y| / |Y| "
+                             f"{f.rel_error_pct:.3g} %)" + (": check --frame and the tool's offset in the model"
+                                                             if f.source == "wrench" else ""))
+    return notes
+
+
 def run_clamped(csv, out: str | Path, positions: str, torques: str | None = None, wrench: str | None = None,
                 wrench_file: str | Path | None = None, time: str = "time", urdf: str | Path | None = None,
                 mdh: str | Path | None = None, frame: str = "tool", joints: str | None = None,
@@ -74,10 +99,18 @@ def run_clamped(csv, out: str | Path, positions: str, torques: str | None = None
                 model = np.column_stack([_column(mdh, mc, c) for c in ("alpha", "d", "theta_offset", "r")])
         else:
             model = urdf
-    sel = None if joints is None else [int(s) - 1 for s in _names(joints, "joints")]
+    sel = None
+    if joints is not None:
+        try:
+            sel = [int(s) - 1 for s in _names(joints, "joints")]
+        except ValueError:
+            raise InputError(None, "joints", "joint numbers, comma-separated", joints) from None
+        if min(sel) < 0 or max(sel) >= len(pos_names):
+            raise InputError(None, "joints", f"joint numbers in 1..{len(pos_names)} (one per --positions column)",
+                             joints)
     res = identify_clamped(t, q_m, tau_m=tau, wrench=F, t_wrench=tw, model=model, frame=frame, joints=sel,
                            names=pos_names, cutoff_hz=cutoff, decimate_cutoff_hz=decimate_cutoff)
-    summary = {"file": str(csv), "joints": [r.to_dict() for r in res]}
+    summary = {"file": str(csv), "joints": [r.to_dict() for r in res], "notes": clamped_notes(res)}
     lines = ["| joint | method | k (N m/rad) | rel. SD (%) | offset (N m) | rel. SD (%) | |W chi - Y| / |Y| (%) |",
              "|---|---|---|---|---|---|---|"]
     for r in res:

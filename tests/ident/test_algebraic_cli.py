@@ -103,6 +103,18 @@ def test_clamped_cli_kr500(tmp_path, capsys):
     rc, out, err = run(capsys, ["clamped", str(tmp_path / "log.csv"), "--positions", pos, "--wrench", "0,0,Fz,0,0,0",
                                 "--wrench-file", str(tmp_path / "ati.csv"), "--out", str(tmp_path / "bad")])
     assert rc == 2 and "robot" in err and not (tmp_path / "bad").exists()
+    rc, out, err = run(capsys, ["clamped", str(tmp_path / "log.csv"), "--positions", pos, "--torques", tq,
+                                "--joints", "7", "--out", str(tmp_path / "bad")])
+    assert rc == 2 and "joint numbers in 1..6" in err and not (tmp_path / "bad").exists()
+    # the wrench read with the other sign (the environment's on the tool): a negative k, said
+    write_csv_columns(tmp_path / "ati_flipped.csv", {"time": ex.t_wrench, "Fz": -ex.wrench[:, 2]})
+    rc, out, err = run(capsys, ["clamped", str(tmp_path / "log.csv"), "--positions", pos, "--wrench", "0,0,Fz,0,0,0",
+                                "--wrench-file", str(tmp_path / "ati_flipped.csv"), "--mdh", "kr500", "--joints", "2",
+                                "--out", str(tmp_path / "f"), "--json"])
+    s = json.loads(out)
+    assert rc == 0 and s["joints"][0]["wrench"]["k"] < 0
+    assert any("is not a stiffness" in n and "wrench's sign" in n for n in s["notes"])
+    assert not any("not a stiffness" in n for n in json.loads((tmp_path / "o" / "clamped.json").read_text())["notes"])
 
 
 def test_algebraic_cli_bad_input(tmp_path, capsys, vibration_csv):
