@@ -27,6 +27,26 @@ def _names(arg: str, what: str) -> list[str]:
     return names
 
 
+def _as_options(e: InputError, csv, time: str) -> InputError:
+    """identify_clamped's complaint about one of its arguments, named by the command's options."""
+    if e.file != "<argument>":
+        return e
+    field = e.field.rsplit(": ", 1)[-1]
+    where = e.field.rsplit(": ", 1)[0] + ": " if ": " in e.field else ""
+    # the command's own options by their argparse names where the CLI says them (--urdf, --torques)
+    option = {"model": "urdf", "tau_m, wrench": "torques", "cutoff_hz": "--cutoff",
+              "decimate_cutoff_hz": "--decimate-cutoff", "excitation": "--positions"}.get(field)
+    if option is None:
+        return e
+    hint = e.hint
+    if field == "cutoff_hz":
+        hint = f"the cut-off is in Hz and column {time!r} in s"
+    elif field == "excitation":
+        hint = "the motor angles must move with the torques (the motors pushing on the clamped arm)"
+    return InputError(csv if field in ("cutoff_hz", "excitation") else None, f"{where}{option}", e.expected, e.got,
+                      hint)
+
+
 MISFIT_PCT = 10.0
 """|W chi - Y| / |Y| above which the joint's torques are not k q_m + offset: the model is said to be off."""
 
@@ -108,8 +128,11 @@ def run_clamped(csv, out: str | Path, positions: str, torques: str | None = None
         if min(sel) < 0 or max(sel) >= len(pos_names):
             raise InputError(None, "joints", f"joint numbers in 1..{len(pos_names)} (one per --positions column)",
                              joints)
-    res = identify_clamped(t, q_m, tau_m=tau, wrench=F, t_wrench=tw, model=model, frame=frame, joints=sel,
-                           names=pos_names, cutoff_hz=cutoff, decimate_cutoff_hz=decimate_cutoff)
+    try:
+        res = identify_clamped(t, q_m, tau_m=tau, wrench=F, t_wrench=tw, model=model, frame=frame, joints=sel,
+                               names=pos_names, cutoff_hz=cutoff, decimate_cutoff_hz=decimate_cutoff)
+    except InputError as e:
+        raise _as_options(e, csv, time) from None
     summary = {"file": str(csv), "joints": [r.to_dict() for r in res], "notes": clamped_notes(res)}
     lines = ["| joint | method | k (N m/rad) | rel. SD (%) | offset (N m) | rel. SD (%) | |W chi - Y| / |Y| (%) |",
              "|---|---|---|---|---|---|---|"]

@@ -102,7 +102,7 @@ def test_clamped_cli_kr500(tmp_path, capsys):
     assert rc == 2 and err.count("\n") == 1 and "--torques" in err and not (tmp_path / "bad").exists()
     rc, out, err = run(capsys, ["clamped", str(tmp_path / "log.csv"), "--positions", pos, "--wrench", "0,0,Fz,0,0,0",
                                 "--wrench-file", str(tmp_path / "ati.csv"), "--out", str(tmp_path / "bad")])
-    assert rc == 2 and "robot" in err and not (tmp_path / "bad").exists()
+    assert rc == 2 and "--urdf: expected the robot" in err and not (tmp_path / "bad").exists()
     rc, out, err = run(capsys, ["clamped", str(tmp_path / "log.csv"), "--positions", pos, "--torques", tq,
                                 "--joints", "7", "--out", str(tmp_path / "bad")])
     assert rc == 2 and "joint numbers in 1..6" in err and not (tmp_path / "bad").exists()
