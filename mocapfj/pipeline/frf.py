@@ -168,20 +168,8 @@ def run_frf(path, out, *, input: str, output: str, reference: str | None = None,
 
     if model not in FRF_CLI_MODELS:
         raise InputError(None, "model", f"one of {', '.join(FRF_CLI_MODELS)}", model)
-    if isinstance(transient, str) and transient != "auto":
-        try:
-            transient = int(transient)
-        except ValueError:
-            raise InputError(None, "transient", "a whole number >= 0 or auto", transient) from None
-    if transient != "auto" and (int(transient) != transient or transient < 0):
-        raise InputError(None, "transient", "a whole number >= 0 or auto", transient)
-    if isinstance(realisations, str) and realisations != "auto":
-        try:
-            realisations = int(realisations)
-        except ValueError:
-            raise InputError(None, "realisations", "a whole number >= 1 or auto", realisations) from None
-    if realisations != "auto" and (int(realisations) != realisations or realisations < 1):
-        raise InputError(None, "realisations", "a whole number >= 1 or auto", realisations)
+    transient = _whole_or_auto(transient, "transient", 0)
+    realisations = _whole_or_auto(realisations, "realisations", 1)
     if steady_period and not single_record:
         raise InputError(None, "steady-period", "only with --single-record", True)
     if order is not None and model != "rational":
@@ -204,7 +192,7 @@ def run_frf(path, out, *, input: str, output: str, reference: str | None = None,
         if realisations == "auto":
             n, realisations = find_period_and_realisations(src, exact=exact)
         else:
-            n = find_period(src[: src.size // int(realisations)], exact=exact)      # one realisation's
+            n = find_period(src[: src.size // realisations], exact=exact)      # one realisation's
         if n is None:
             raise InputError(csv, "--reference" if "--reference" in cols else "--input",
                              "a periodic signal (the period found from where it repeats)", "no period found",
@@ -218,16 +206,16 @@ def run_frf(path, out, *, input: str, output: str, reference: str | None = None,
                              f"{period_s} s = {period_s * fs:.6g} steps")
         if realisations == "auto":
             realisations = find_realisations(src, n) or 1
-    T = t.size // int(realisations)
+    T = t.size // realisations
 
     def parts(x):
-        return x[: T * int(realisations)].reshape(int(realisations), T)
+        return x[: T * realisations].reshape(realisations, T)
 
     col_of = {"u": input, "y": output, "r": reference}
     try:
         frf = estimate_frf(parts(cols["--input"]), parts(cols["--output"]), fs, n,
                            r=parts(cols["--reference"]) if "--reference" in cols else None, estimator=estimator,
-                           transient_periods=transient if transient == "auto" else int(transient))
+                           transient_periods=transient)
     except InputError as e:
         if e.file == "<argument>" and e.field in col_of:
             raise InputError(csv, f"column {col_of[e.field]!r}", e.expected, e.got, e.hint) from None
@@ -249,6 +237,19 @@ def run_frf(path, out, *, input: str, output: str, reference: str | None = None,
         summary["comparison"] = compare_with_identify(summary, *reference_ident)
     _write(out, summary, frf, fit)
     return summary
+
+
+def _whole_or_auto(value, name: str, least: int):
+    """An option that is "auto" or a whole number >= least (given as a number or its text)."""
+    if value == "auto":
+        return value
+    try:
+        n = int(value)
+    except (TypeError, ValueError):
+        n = None
+    if n is None or n != float(value) or n < least:
+        raise InputError(None, name, f"a whole number >= {least} or auto", value)
+    return n
 
 
 def frf_notes(frf, fit, *, gravity_fitted: bool) -> list[str]:
