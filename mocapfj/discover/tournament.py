@@ -163,7 +163,8 @@ class Judge:
             j.admissible = True
         else:
             j.reason = (f"its held-out gain {gain:+.2f} points ({parts}) is below {self.gain_sds:g} noise SDs "
-                        f"({j.sd:.2f}) and its equation-error signal is weak (p = {score['p_value'] * n_tests:.2g})")
+                        f"({j.sd:.2f} each) and its equation-error signal (p = {score['p_value'] * n_tests:.2g}) is "
+                        f"above the {self.alpha:g} that admits an effect on it alone")
         return j
 
     def _by_validation(self, j: Judged) -> bool:
