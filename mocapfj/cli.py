@@ -337,6 +337,13 @@ def _cmd_discover(args) -> int:
                 if "fit_with_effects" in r:
                     line += f", {r['fit_with_effects']:.2f} % with {', '.join(e['name'] for e in r['effects'])}"
                 lines.append(line + f"; adopted: {r['adopted']}")
+                c = r.get("clock_equivalent")
+                if c:
+                    lines.append(f"  note: {j}'s viscous friction moved {c['v_change_pct']:+.0f} % ({c['v_sds']:+.1f} SD) "
+                                 f"from the nominal: what a clock offset of {1e3 * c['offset_s']:+.2f} ms between the "
+                                 "mocap and the controller log would do (v ~ k dt; only the torque tells them apart, "
+                                 "and output error reports no offset below 1 ms): check the synchronisation before "
+                                 "reading it as friction")
             elif r:
                 lines.append(f"  {j}: {r['error']}")
         lines.append(f"  wrote {args.out}/discovery.json, model.toml, residuals.csv")

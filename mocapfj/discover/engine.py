@@ -127,6 +127,27 @@ class Discovery:
                 "verdict": self.verdict}
 
 
+def clock_equivalent(report: dict, delay_named: bool) -> None:
+    """Adds `clock_equivalent` to a joint's re-identification report (docs/discovery.md) when the
+    model adopted has its link viscous friction v moved from the nominal by more than GAIN_SDS of
+    its SDs and no clock offset was named: a mocap angle dt late on the controller's clock reads as
+    the link's viscous lag, v -> v - k dt (mocapfj.ident.output_error.CLOCK_MIN_S); only the torque
+    tells the two apart, and output error reports no offset below CLOCK_MIN_S, so a v that moved by
+    k x CLOCK_MIN_S or less may be an offset in the synchronisation instead: {offset_s: -dv / k with the nominal k, v_change_pct,
+    v_sds}. On the hinge grid (seed 21000) a 0.82 ms offset planted with a hysteresis was absorbed
+    this way, v +66 % at 5.3 SDs: the offset it gives is -0.93 ms."""
+    from ..ident.output_error import CLOCK_MIN_S
+
+    p = report.get("parameters") or {}
+    v, k = p.get("v"), p.get("k")
+    if (delay_named or report.get("adopted", "none") == "none" or not v or not k or v.get("sds") is None
+            or not abs(v["sds"]) > GAIN_SDS or not k["nominal"] > 0):
+        return
+    dt = -(v["value"] - v["nominal"]) / k["nominal"]
+    if abs(dt) <= CLOCK_MIN_S:
+        report["clock_equivalent"] = {"offset_s": dt, "v_change_pct": v["change_pct"], "v_sds": v["sds"]}
+
+
 def _changes(params: dict) -> str:
     """The re-identified parameters that moved most (by more than GAIN_SDS of their SDs or 5 %),
     as changes in % with their size in SDs."""
@@ -786,6 +807,9 @@ def _discover(signals: dict, models: dict, ahead, *, parallel: bool = True, fs_h
             reidentified[jn] = _reidentification(jn, signals[jn], nominal[jn], current, found, rejected, held_out,
                                                  validation is not None and jn in validation, holdout,
                                                  {k: v for k, v in qdd.items() if k != jn}, ahead, made.get(jn))
+        delay_named = any(f["name"] == "time_delay" for f in found)         # the clock is the recording's
+        for r in reidentified.values():
+            clock_equivalent(r, delay_named)
         fams, qdd = _families_all(current, signals, fs_hz, ctx)
     effects_out, fit_before, fit_after, fits, residuals = [], {}, {}, {}, {}
     val = None
