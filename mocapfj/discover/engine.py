@@ -105,6 +105,9 @@ class Discovery:
         left += [f"{j} ({', '.join(f'{ch} fit {g:.2g} points' for ch, g in r['channels_below_floor'].items())} below "
                  "the noise floor)" for j, r in self.remaining.items()
                  if r.get("fit_unexplained") and not (r["spring_unexplained"] or r["link_unexplained"])]
+        left += [f"{j}'s validation recording ({', '.join(f'{ch} fit {g:.2g} points' for ch, g in over.items())} "
+                 "below the noise floor)" for j, r in self.remaining.items()
+                 if (over := r.get("validation_channels_below_floor"))]
         found = ", ".join(f"{e['name']} ({e['joint']})" for e in self.effects)
         off = [f"{j} ({_changes(r['parameters'])})" for j, r in self.reidentified.items()
                if r.get("adopted") == "re-identified nominal"]
@@ -146,6 +149,15 @@ def clock_equivalent(report: dict, delay_named: bool) -> None:
     dt = -(v["value"] - v["nominal"]) / k["nominal"]
     if abs(dt) <= CLOCK_MIN_S:
         report["clock_equivalent"] = {"offset_s": dt, "v_change_pct": v["change_pct"], "v_sds": v["sds"]}
+
+
+def _below_floor(a: dict) -> dict:
+    """{channel: points} of the channels (deflection, torque) of a comparison (`fits[j]["after"]`)
+    whose fit is more than GAP_POINTS, or 2 SDs of their floor when those are more, below their
+    noise floor: judged each on its own, so that a noisy deflection cannot hide a torque the model
+    misses (or the reverse)."""
+    return {ch: float(a[f"floor_{ch}"] - a[ch]) for ch in ("deflection", "torque")
+            if a[f"floor_{ch}"] - a[ch] > np.nanmax([GAP_POINTS, 2.0 * a[f"floor_sd_{ch}"]])}
 
 
 def _changes(params: dict) -> str:
@@ -866,12 +878,15 @@ def _discover(signals: dict, models: dict, ahead, *, parallel: bool = True, fs_h
     remaining = {jn: _remaining(fams[jn], signals[jn]) for jn in names}
     for jn in fits:
         # the comparison's verdict: the augmented model's fit against the recording's noise floor
-        a = fits[jn]["after"]
-        gap = float(a["gap_to_floor"])
-        # per channel: a noisy deflection must not hide a torque the model misses (or the reverse)
-        over = {ch: float(a[f"floor_{ch}"] - a[ch]) for ch in ("deflection", "torque")
-                if a[f"floor_{ch}"] - a[ch] > np.nanmax([GAP_POINTS, 2.0 * a[f"floor_sd_{ch}"]])}
-        remaining[jn].update(gap_to_floor=gap, channels_below_floor=over, fit_unexplained=bool(over))
+        over = _below_floor(fits[jn]["after"])
+        remaining[jn].update(gap_to_floor=float(fits[jn]["after"]["gap_to_floor"]), channels_below_floor=over,
+                             fit_unexplained=bool(over))
+        remaining[jn]["unexplained"] = bool(remaining[jn]["unexplained"] or over)
+    for jn in (val or {}).get("fits", {}):
+        # and on the validation recording, which can show what the trial does not excite (free play
+        # on a heavy joint whose trial torque never reverses: 4.5 points below its floor there)
+        over = _below_floor(val["fits"][jn]["after"])
+        remaining[jn]["validation_channels_below_floor"] = over
         remaining[jn]["unexplained"] = bool(remaining[jn]["unexplained"] or over)
     d = Discovery(effects=effects_out, models=current, nominal=nominal, fit_before=fit_before, fit_after=fit_after,
                   fits=fits, location=location, validation=val, residuals=residuals, stopped=stop,

@@ -170,3 +170,29 @@ def test_a_sub_millisecond_clock_offset_reads_as_the_viscous_friction_clock_equi
         r.pop("clock_equivalent")
         clock_equivalent(r, delay_named="delay" in changed)
         assert "clock_equivalent" not in r
+
+
+def test_a_mismatch_the_validation_recording_shows_is_not_called_clean():
+    """A validation recording can show what its trial does not excite: a heavy joint's free play
+    (hinge grid seed 21000, case 003) left its validation deflection 4.5 points below the floor
+    (floor SD 0.72) and torque 2.3, and the verdict read "no missing physics found". Each channel
+    is judged as on the trial: beyond 1 point, or 2 floor SDs when those are more."""
+    from mocapfj.discover.engine import Discovery, _below_floor
+
+    def after(fit_d, fit_u, sd_d=0.7, sd_u=0.2):
+        return {"deflection": fit_d, "floor_deflection": 60.0, "floor_sd_deflection": sd_d,
+                "torque": fit_u, "floor_torque": 90.0, "floor_sd_torque": sd_u}
+
+    assert _below_floor(after(55.47, 87.75)) == pytest.approx({"deflection": 4.53, "torque": 2.25})
+    assert _below_floor(after(58.7, 89.2)) == {}                  # 1.3 < 2 x 0.7; 0.8 < 1 point
+    assert _below_floor(after(58.7, 89.2, sd_d=0.5)) == pytest.approx({"deflection": 1.3})
+
+    clean = {"spring_unexplained": False, "link_unexplained": False, "unexplained": False,
+             "channels_below_floor": {}, "fit_unexplained": False}
+    d = Discovery(effects=[], models={}, nominal={}, fit_before={}, fit_after={}, fits={}, location={},
+                  validation=None, remaining={"j1": dict(clean)})
+    assert d.verdict == "no missing physics found"
+    d.remaining["j1"]["validation_channels_below_floor"] = _below_floor(after(55.47, 87.75))
+    assert d.verdict == ("no effect of the library found; a mismatch no effect of the library explains remains on "
+                         "j1's validation recording (deflection fit 4.5 points, torque fit 2.2 points below the "
+                         "noise floor) (see location)")
