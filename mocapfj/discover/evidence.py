@@ -156,7 +156,7 @@ class Evidence:
             return math.nan
         _, _, sd_d, sd_u = self._recorded(sl)
         return fit_change_sd(self.t, keep, self.band_hz, a.fit,
-                             [(sd_d, self.noise_delta, b.delta_sim - a.delta_sim),
+                             [(sd_d, self.noise_delta, b.delta_sim - a.delta_sim, True),
                               (sd_u, self.noise_u, b.u_sim - a.u_sim)])
 
     def compare(self, model: JointModel) -> OutputError:

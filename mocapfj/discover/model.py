@@ -220,7 +220,7 @@ class OutputError:
 
         keep = np.isfinite(self.r_delta) & np.isfinite(other.r_delta)
         return fit_change_sd(self.t, keep, self.band_hz, self.fit,
-                             [(self.sd_delta, self.noise_delta_rad, other.delta_sim - self.delta_sim),
+                             [(self.sd_delta, self.noise_delta_rad, other.delta_sim - self.delta_sim, True),
                               (self.sd_u, self.noise_u_Nm, other.u_sim - self.u_sim)])
 
     def summary(self) -> dict:
