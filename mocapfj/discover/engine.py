@@ -108,7 +108,7 @@ class Discovery:
         left += [f"{j}'s validation recording ({', '.join(f'{ch} fit {g:.2g} points' for ch, g in over.items())} "
                  "below the noise floor)" for j, r in self.remaining.items()
                  if (over := r.get("validation_channels_below_floor"))]
-        found = ", ".join(f"{e['name']} ({e['joint']})" for e in self.effects)
+        found = ", ".join(f"{e['name']} ({e['joint']}{_ties(e)})" for e in self.effects)
         off = [f"{j} ({_changes(r['parameters'])})" for j, r in self.reidentified.items()
                if r.get("adopted") == "re-identified nominal"]
         if off:
@@ -149,6 +149,14 @@ def clock_equivalent(report: dict, delay_named: bool) -> None:
     dt = -(v["value"] - v["nominal"]) / k["nominal"]
     if abs(dt) <= CLOCK_MIN_S:
         report["clock_equivalent"] = {"offset_s": dt, "v_change_pct": v["change_pct"], "v_sds": v["sds"]}
+
+
+def _ties(effect: dict) -> str:
+    """What the verdict says of the candidates an effect was chosen among because the held-out
+    recordings fit them alike (the tournament's tie: a free play and a stiffening spring on a
+    joint gravity holds on one side of its deflection, hinge grid seed 22000)."""
+    ties = [t["name"] for t in (effect.get("location") or {}).get("indistinguishable_from") or ()]
+    return f"; or {' or '.join(ties)}, which the recordings fit as well" if ties else ""
 
 
 def _below_floor(a: dict) -> dict:

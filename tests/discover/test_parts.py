@@ -196,3 +196,21 @@ def test_a_mismatch_the_validation_recording_shows_is_not_called_clean():
     assert d.verdict == ("no effect of the library found; a mismatch no effect of the library explains remains on "
                          "j1's validation recording (deflection fit 4.5 points, torque fit 2.2 points below the "
                          "noise floor) (see location)")
+
+
+def test_the_verdict_names_what_the_recordings_cannot_tell_from_the_effect_chosen():
+    """A free play and a stiffening spring on a joint that gravity holds on one side of its
+    deflection gained 34.948 and 34.950 points on the held-out recordings (hinge grid seed 22000,
+    a cubic spring planted): the tournament picks one, and the verdict says the other fits as well."""
+    from mocapfj.discover.engine import Discovery
+
+    clean = {"spring_unexplained": False, "link_unexplained": False, "unexplained": False,
+             "channels_below_floor": {}, "fit_unexplained": False}
+    tie = {"name": "stiffening", "held_out_gain_points": 34.950, "difference_points": 0.0013,
+           "difference_sd_points": 0.024}
+    d = Discovery(effects=[{"name": "backlash", "joint": "j1", "location": {"indistinguishable_from": [tie]}},
+                           {"name": "time_delay", "joint": "j1", "location": {}}],
+                  models={}, nominal={}, fit_before={}, fit_after={}, fits={}, location={}, validation=None,
+                  remaining={"j1": clean})
+    assert d.verdict == ("missing physics: backlash (j1; or stiffening, which the recordings fit as well), "
+                         "time_delay (j1)")
