@@ -788,12 +788,24 @@ def _discover(signals: dict, models: dict, ahead, *, parallel: bool = True, fs_h
             score = {**win.score, **score_dict(win), "indistinguishable_from": ties,
                      "candidates": [{"name": j.candidate.name, "joint": j.joint, "held_out_gain_points": j.gain,
                                      "held_out_gain_sd_points": j.sd, "admissible": j.admissible} for j in judged]}
+            before = current[jn]
             current[jn] = augmented
             found.append({"name": cand.name, "joint": jn, "candidate": cand, "score": score, "model": augmented,
                           "p_value": min(1.0, 2.0 * min(win.score["p_value"] * n_tests, p_oe)),
                           "runner_up": sorted(((j.candidate.name, j.gain) for j in judged if j is not win),
                                               key=lambda x: -x[1])[:3]})
-            fams, qdd = _families_all(current, signals, fs_hz, ctx)
+            try:
+                fams, qdd = _families_all(current, signals, fs_hz, ctx)
+            except InputError as e:
+                # a model the equation-error residuals cannot be formed with: not kept
+                found.pop()
+                current[jn] = before
+                if validation is not None and jn in validation:
+                    held_out(jn)[3].pop()
+                banned.add((jn, cand.name))
+                rejected.append({"name": cand.name, "joint": jn, "parameters": cand.params,
+                                 "reason": f"its fit on the whole trial leaves residuals that cannot be formed "
+                                           f"({e.field}: expected {e.expected})"})
             continue
         # the search alone (simulate=False): the clearest significant effect, by equation error
         sig = sorted((x for x in results if x[2]["explained_Nm"] >= floor[x[0]] and x[2]["p_value"] * n_tests < alpha),

@@ -214,3 +214,32 @@ def test_the_verdict_names_what_the_recordings_cannot_tell_from_the_effect_chose
                   remaining={"j1": clean})
     assert d.verdict == ("missing physics: backlash (j1; or stiffening, which the recordings fit as well), "
                          "time_delay (j1)")
+
+
+def test_a_free_play_wider_than_the_deflections_met_is_not_a_candidate_model():
+    """A free play is seen only where the deflection crosses it. An output-error refit on a joint
+    whose load never reverses drifted to a 149 mrad gap (hinge grid seed 22000, deflections within
+    +-3.3 mrad): the spring never engaged, the fit looked fine (the deflection is compared less its
+    mean) and the equation-error residuals could not be formed, so discovery exited with an error.
+    The candidate's model now refuses a gap wider than twice the largest deflection met."""
+    from mocapfj.discover.effects import backlash
+    from mocapfj.discover.model import simulate_joint
+    from mocapfj.discover.residuals import families
+
+    (m,) = read_model_file(ROOT / "datasets" / "pa10_joint2.toml").values()
+    fs = 250.0
+    t = np.arange(0.0, 20.0, 1.0 / fs)
+    q_m = 0.3 + 0.3 * np.sin(2 * np.pi * 0.1 * t) + 0.08 * np.sin(2 * np.pi * 0.4 * t + 0.7)
+    truth = m.with_(spring=BoucWen(k=m.stiffness(), alpha=0.7, beta=300.0, gamma=300.0))
+    sim = simulate_joint(truth, t, q_m - 1e-3, q_m, 50.0 * np.sin(t), period_s=None)
+    q = q_m - sim.delta_sim
+    ok = np.isfinite(q)
+    t, q, q_m, u = t[ok], q[ok], q_m[ok], sim.u_sim[ok]
+    fam = families(m, t, q, q_m, u, fs_hz=fs, others_qdd={})
+    cand = backlash(fam, fam.residual("spring")[1], {})
+    assert cand is not None
+    widest = 2.0 * np.max(np.abs(fam.d_hat[fam.keep_s]))
+    assert cand.apply(m).spring.gap <= widest
+    with pytest.raises(InputError, match="gap_rad"):
+        cand.rebuild(np.array([np.log(1.01 * widest), 0.0]))
+    assert cand.rebuild(np.array([np.log(0.99 * widest), 0.0])).apply(m).spring.gap == pytest.approx(0.99 * widest)
