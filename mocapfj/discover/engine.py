@@ -136,9 +136,10 @@ def clock_equivalent(report: dict, delay_named: bool) -> None:
     its SDs and no clock offset was named: a mocap angle dt late on the controller's clock reads as
     the link's viscous lag, v -> v - k dt (mocapfj.ident.output_error.CLOCK_MIN_S); only the torque
     tells the two apart, and output error reports no offset below CLOCK_MIN_S, so a v that moved by
-    k x CLOCK_MIN_S or less may be an offset in the synchronisation instead: {offset_s: -dv / k with the nominal k, v_change_pct,
-    v_sds}. On the hinge grid (seed 21000) a 0.82 ms offset planted with a hysteresis was absorbed
-    this way, v +66 % at 5.3 SDs: the offset it gives is -0.93 ms."""
+    k x CLOCK_MIN_S or less may be an offset in the synchronisation instead: {offset_s: -dv / k
+    with the nominal k, v_change_pct, v_sds}. On the hinge grid (seed 21000) a 0.82 ms offset
+    planted with a hysteresis was absorbed this way, v +66 % at 5.3 SDs: the offset it gives is
+    -0.93 ms."""
     from ..ident.output_error import CLOCK_MIN_S
 
     p = report.get("parameters") or {}
