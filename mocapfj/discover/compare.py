@@ -243,7 +243,8 @@ def combined_floor_sd(d: Channel, u: Channel) -> float:
     return float(math.hypot(d.e_floor * np.nan_to_num(d.floor_sd), u.e_floor * np.nan_to_num(u.floor_sd)) / (2.0 * e))
 
 
-def fit_change_sd(t: np.ndarray, keep: np.ndarray, band_hz: float, fit: float, channels) -> float:
+def fit_change_sd(t: np.ndarray, keep: np.ndarray, band_hz: float, fit: float, channels,
+                  with_size: bool = False) -> float | tuple[float, float]:
     """The SD (points) of the change in a joint's fit between two models compared on one recording
     in one band that the recording's noise alone gives (docs/conventions.md, "Fit and noise floor").
 
@@ -259,6 +260,12 @@ def fit_change_sd(t: np.ndarray, keep: np.ndarray, band_hz: float, fit: float, c
     large (hinge grid seed 22000: a cubic spring's validation gain 14.9 points at an SD of 3.3,
     where 200 noise draws give 1.3).
 
+    With `with_size`, also the change's size G (points): |m|^2 through the same first order, the
+    gain the second model would bring if it were the truth and the first left m out (and minus the
+    loss if the first were). The gain is then G (2 a - 1) when the recording holds a x m, so
+    (gain + G) / SD is the recording's own estimate of a in SDs: the z of the change's shape in
+    the residual, which does not depend on the change's fitted size (:mod:`.tournament`).
+
     t, keep : (T,) the samples compared; fit : the first model's joint fit %; channels : for each
     channel (recorded SD in band, noise SD in band, the change of the prediction (T,), and
     optionally whether the channel is compared less its mean)."""
@@ -267,15 +274,19 @@ def fit_change_sd(t: np.ndarray, keep: np.ndarray, band_hz: float, fit: float, c
     idx = np.flatnonzero(keep)
     sl = slice(int(idx[0]), int(idx[-1]) + 1)
     E = (1.0 - fit / 100.0) ** 2
-    var = 0.0
+    var, size = 0.0, 0.0
     for sd_y, sigma, dm, *center in channels:
         if not (sd_y > 0 and np.isfinite(sigma)):
             continue
         m = in_band(np.nan_to_num(np.asarray(dm, dtype=np.float64)[sl]), fs, band_hz)
         if center and center[0]:
             m = m - m.mean()
-        # d(e^2) of this channel: 2 <n, m> / (N sd_y^2)
-        var += (2.0 * sigma * float(np.linalg.norm(m)) / math.sqrt(g) / (m.size * sd_y ** 2)) ** 2
+        # d(e^2) of this channel: 2 <n, m> / (N sd_y^2); its size |m|^2 / (N sd_y^2)
+        mm = float(m @ m)
+        var += (2.0 * sigma * math.sqrt(mm) / math.sqrt(g) / (m.size * sd_y ** 2)) ** 2
+        size += mm / (m.size * sd_y ** 2)
     if not E > 0:
-        return math.nan
-    return float(100.0 / (2.0 * math.sqrt(E)) * 0.5 * math.sqrt(var))
+        return (math.nan, math.nan) if with_size else math.nan
+    k = 100.0 / (2.0 * math.sqrt(E)) * 0.5
+    sd = float(k * math.sqrt(var))
+    return (sd, float(k * size)) if with_size else sd

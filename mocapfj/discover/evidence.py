@@ -145,19 +145,20 @@ class Evidence:
         n = rd.size
         return np.concatenate([rd / (sd_d * math.sqrt(2 * n)), ru / (sd_u * math.sqrt(2 * n))])
 
-    def change_sd(self, a: Score, b: Score) -> float:
-        """The SD (points) of b.fit - a.fit that this recording's noise alone gives
-        (:func:`.compare.fit_change_sd`)."""
+    def change_sd(self, a: Score, b: Score, with_size: bool = False) -> float | tuple[float, float]:
+        """The SD (points) of b.fit - a.fit that this recording's noise alone gives, and with
+        `with_size` the change's size (:func:`.compare.fit_change_sd`)."""
+        nan = (math.nan, math.nan) if with_size else math.nan
         if a.delta_sim is None or b.delta_sim is None or not math.isfinite(a.fit):
-            return math.nan
+            return nan
         keep = self.inner & np.isfinite(a.delta_sim) & np.isfinite(b.delta_sim)
         sl = self._span(np.where(keep, 0.0, np.nan))
         if sl is None:
-            return math.nan
+            return nan
         _, _, sd_d, sd_u = self._recorded(sl)
         return fit_change_sd(self.t, keep, self.band_hz, a.fit,
                              [(sd_d, self.noise_delta, b.delta_sim - a.delta_sim, True),
-                              (sd_u, self.noise_u, b.u_sim - a.u_sim)])
+                              (sd_u, self.noise_u, b.u_sim - a.u_sim)], with_size=with_size)
 
     def compare(self, model: JointModel) -> OutputError:
         """The full comparison (:func:`.model.simulate_joint`) in this band."""

@@ -185,6 +185,113 @@ def test_the_sd_of_a_change_of_fit_matches_its_scatter_over_noise(offset):
     assert np.std(changes) == pytest.approx(np.median(sds), rel=0.15)
 
 
+@pytest.mark.parametrize("share", [0.0, 1.0, 3.0])
+def test_the_size_of_a_change_gives_the_mean_gain_and_the_share_of_it_the_recording_holds(share):
+    """A recording holding `share` x m beside the truth y (white noise on both channels, 300
+    realisations, the deflection less its mean): the prediction y + m gains G (2 share - 1) points
+    on average over y, G being the size fit_change_sd gives, and (gain + G) / SD estimates share
+    in units of 2 G / SD with unit scatter (the z the tournament's whole-evidence test adds up)."""
+    from mocapfj.discover.compare import combined_fit, compare_channel, fit_change_sd
+
+    fs, T = 200.0, 4000
+    t = np.arange(T) / fs
+    y_d, y_u = 1e-3 * np.sin(2 * np.pi * 0.3 * t), 10.0 * np.sin(2 * np.pi * 0.5 * t + 0.3)
+    m_d, m_u = 1e-4 + 2e-5 * np.sin(2 * np.pi * 1.1 * t), 0.1 * np.cos(2 * np.pi * 0.7 * t)
+    keep = np.ones(T, bool)
+    g = noise_gain(fs, 5.0)
+    rng = np.random.default_rng(11)
+    gains, sizes, zs, ws = [], [], [], []
+    for _ in range(300):
+        rd = y_d + share * m_d + 2e-4 * rng.standard_normal(T)
+        ru = y_u + share * m_u + 1.0 * rng.standard_normal(T)
+        a = [compare_channel(rd, y_d, None, fs, 5.0, keep, None, center=True),
+             compare_channel(ru, y_u, None, fs, 5.0, keep, None)]
+        b = [compare_channel(rd, y_d + m_d, None, fs, 5.0, keep, None, center=True),
+             compare_channel(ru, y_u + m_u, None, fs, 5.0, keep, None)]
+        fa, fb = combined_fit(a[0].e, a[1].e), combined_fit(b[0].e, b[1].e)
+        sd, size = fit_change_sd(t, keep, 5.0, fa, [(a[0].sd_y, 2e-4 * math.sqrt(g), m_d, True),
+                                                    (a[1].sd_y, math.sqrt(g), m_u)], with_size=True)
+        gains.append(fb - fa)
+        sizes.append(size)
+        zs.append((fb - fa + size) / sd)
+        ws.append(2.0 * size / sd)
+    G, w = np.median(sizes), np.median(ws)
+    assert G > 0 and w > 3.0
+    # first order: within 10 % of the gain's size, or of G (at share 3 the fit's square root bends)
+    assert np.mean(gains) == pytest.approx(G * (2 * share - 1), abs=0.1 * G * max(1.0, abs(2 * share - 1))
+                                           + 3 * np.std(gains) / math.sqrt(300))
+    assert np.mean(zs) / w == pytest.approx(share, abs=0.1 * max(1.0, share) + 3 / (w * math.sqrt(300)))
+    assert np.std(zs) == pytest.approx(1.0, rel=0.15)
+
+
+def test_the_whole_evidence_z_is_the_projection_of_all_the_residual_on_the_change():
+    """Judge.whole_z adds up a candidate's z over the trial's first part and the held-out
+    recordings (parts of one white-noise recording here, of unequal length): it equals the z of the
+    change's shape in the whole residual, <r, m> / (sigma |m|), computed at once on the whole
+    recording, within 3 % (the fits' first order). The change is in the deflection alone: with
+    both channels each recording weighs them as its fit does (1 / SD^2 of the recorded signal),
+    still a z of unit variance, but not this one."""
+    from mocapfj.discover.compare import in_band
+    from mocapfj.discover.evidence import Score
+    from mocapfj.discover.tournament import Judge, Judged
+
+    fs, band, T = 200.0, 5.0, 12000
+    t = np.arange(T) / fs
+    rng = np.random.default_rng(5)
+    y_d, y_u = 1e-3 * np.sin(2 * np.pi * 0.3 * t), 10.0 * np.sin(2 * np.pi * 0.5 * t + 0.3)
+    m_d, m_u = 1.5e-5 * np.sin(2 * np.pi * 0.9 * t + 1.0) + 2e-5, np.zeros(T)
+    noise_d, noise_u = 2e-4 * rng.standard_normal(T), 1.0 * rng.standard_normal(T)
+    rec_d, rec_u = y_d + 0.4 * m_d + noise_d, y_u + 0.4 * m_u + noise_u
+    sg = math.sqrt(noise_gain(fs, band))
+
+    class Part:
+        """A piece of the recording scored as Evidence scores one (the fit of the two channels)."""
+
+        def __init__(self, lo, hi, name):
+            self.sl, self.name = slice(lo, hi), name
+
+        def score(self, model):
+            sl = self.sl
+            d, u = y_d[sl] + model * m_d[sl], y_u[sl] + model * m_u[sl]
+            rd, ru = in_band(rec_d[sl] - d, fs, band), in_band(rec_u[sl] - u, fs, band)
+            rd = rd - rd.mean()
+            sd_d, sd_u = np.std(in_band(rec_d[sl], fs, band)), np.std(in_band(rec_u[sl], fs, band))
+            e2 = (np.mean(rd ** 2) / sd_d ** 2 + np.mean(ru ** 2) / sd_u ** 2) / 2.0
+            return Score(100.0 * (1.0 - math.sqrt(e2)), np.asarray(d), np.asarray(u))
+
+        def change_sd(self, a, b, with_size=False):
+            from mocapfj.discover.compare import fit_change_sd
+
+            sl = self.sl
+            sd_d, sd_u = np.std(in_band(rec_d[sl], fs, band)), np.std(in_band(rec_u[sl], fs, band))
+            return fit_change_sd(t[sl], np.ones(sl.stop - sl.start, bool), band, a.fit,
+                                 [(sd_d, 2e-4 * sg, b.delta_sim - a.delta_sim, True),
+                                  (sd_u, 1.0 * sg, b.u_sim - a.u_sim)], with_size=with_size)
+
+    parts = {"head": Part(0, 7000, "trial's first part"), "tail": Part(7000, 9000, "trial's held-out part"),
+             "validation": Part(9000, T, "validation recording")}
+    judge = Judge({}, None, {}, {}, {}, 0.3, {}, 3.0, 0.1, 1e-10)
+    judge.evidence = lambda jn, part: parts[part]
+    j = Judged("j1", None, {}, 1.0)
+    for part in ("tail", "validation"):
+        ev = parts[part]
+        a, b = ev.score(0.0), ev.score(1.0)
+        sd, size = ev.change_sd(a, b, with_size=True)
+        j.gains[ev.name], j.sizes[ev.name] = (b.fit - a.fit, sd), size
+    z = judge.whole_z("j1", j, 0.0)
+    # the same z at once: the in-band residual of the model without m, projected on m per channel
+    num, den = 0.0, 0.0
+    for p in parts.values():
+        sl = p.sl
+        r, mm = in_band(rec_d[sl] - y_d[sl], fs, band), in_band(m_d[sl], fs, band)
+        r, mm = r - r.mean(), mm - mm.mean()
+        num += float(r @ mm)
+        den += float(mm @ mm)
+    den *= 2e-4 ** 2
+    assert z == pytest.approx(num / math.sqrt(den), rel=0.03)
+    assert 2.0 < z < 12.0          # the change is there (0.4 m), and seen
+
+
 @pytest.mark.parametrize("effect", ["transmission_error", "backlash"])
 def test_grid_subset_an_effect_at_the_noise_is_named_and_recovers_the_gap(effect):
     """The fast subset of benchmarks/bench_discover_grid.py: a PA-10 case of the independent hinge
