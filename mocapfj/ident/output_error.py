@@ -418,6 +418,7 @@ class _Problem:
         self._x = np.zeros(len(OE_NAMES))
         self.dt = float(dt)           # the mocap instants' offset on the controller clock, s
         self._n_first = None          # substeps per sample of the first simulation (_link)
+        self.omega_cap = math.inf     # the highest link resonance simulated, rad/s (_link)
 
     def set_noise(self, noise):
         """noise = ((a_q, sd_q), (a_u, sd_u)): the whitening filters and innovation SDs."""
@@ -441,11 +442,17 @@ class _Problem:
         # A trial step towards a vanishing inertia or a huge stiffness raises the resonance, and the
         # kernel's substeps with it, without bound (an hour for one simulation of a light joint):
         # a resonance more than SUBSTEP_GROWTH x the first one simulated is treated as diverged.
+        # The first simulation of each problem sets its cap, and the identification's start sets
+        # `omega_cap` for all its problems: without it, each fit starting where the last one stopped
+        # ratcheted the inertia down by 256 x per fit, to 2e-10 kg m^2 on a light cobot whose link
+        # inertia its data barely determine (178 000 substeps per sample: a re-identification still
+        # running after 27 minutes; hinge grid seed 23000).
         I_min = p["I"] + self.d.I_ctx[0]
         n = substeps(I_min, p["k"], 1.0 / self.d.fs, self.max_phase) if I_min > 0 and p["k"] > 0 else 1
         if self._n_first is None:
             self._n_first = n
-        if n > max(MIN_SUBSTEP_CAP, SUBSTEP_GROWTH * self._n_first):
+        too_fast = I_min > 0 and p["k"] > 0 and math.sqrt(p["k"] / I_min) > self.omega_cap
+        if too_fast or n > max(MIN_SUBSTEP_CAP, SUBSTEP_GROWTH * self._n_first):
             T = self.d.q_drive.size
             nan = np.full(T, np.nan)
             return (nan, nan, np.full((T, 8), np.nan), np.full((T, 8), np.nan)) if sens else (nan, nan)
@@ -665,6 +672,7 @@ def _encoder_noise_shift(q_m_c, fs_c, u_c, t_c, t, q, measured, trim_s, band, la
         d2 = _Data(t_c, q_m_c + rng.normal(0.0, sm, q_m_c.size), u_c, fs_c, t, q, measured, trim_s, band,
                    context=prob.d.context)
         p2 = _Problem(d2, law, scale, noise, cubic=prob.cubic, dt=prob.dt)
+        p2.omega_cap = prob.omega_cap
         J = p2.jac_full(x)[:, free]
         r = p2.fun(x[p2.free])
         sc = np.linalg.norm(J, axis=0)
@@ -704,9 +712,10 @@ def _wiener_drive_shift(q_m_c, fs_c, u_c, t_c, t, q, measured, trim_s, band, law
     noise = ((prob.a_q, prob.s_q), (prob.a_u, prob.s_u))
     search = _Problem(d2, law, scale, noise, max_phase=0.15, cubic=prob.cubic, dt=prob.dt)
     search.free = prob.free & free
+    search.omega_cap = prob.omega_cap
     best = _search_split(x, lambda xs: _solve(search, xs, 8, 1e-6)[:2])
     p2 = _Problem(d2, law, scale, noise, cubic=prob.cubic, dt=prob.dt)
-    p2.free = search.free
+    p2.free, p2.omega_cap = search.free, prob.omega_cap
     x2, _, _ = _solve(p2, best[1], 20, 1e-8)
     return np.where(free, x2 - x, 0.0)
 
@@ -840,7 +849,7 @@ def _clock_offset_fit(prob: _Problem, x, budget: int = 30) -> tuple:
 
     d = prob.d
     p2 = _Problem(d, prob.law, prob.scale, ((prob.a_q, prob.s_q), (prob.a_u, prob.s_u)), cubic=prob.cubic)
-    p2.free = prob.free.copy()
+    p2.free, p2.omega_cap = prob.free.copy(), prob.omega_cap
     f = p2.free
     lo, hi = _bounds(d)
     x = np.asarray(x, dtype=np.float64)
@@ -977,6 +986,11 @@ def identify_output_error(t, q, q_m, u, *, fs_hz: float, measured=None, controll
     x = np.concatenate([x, [0.0, 0.0]])
     nfev = 0
     datas = {}
+    # the link resonance no fit may pass: SUBSTEP_GROWTH x the start's (256 x its stiffness-to-
+    # inertia ratio, far outside what the data can support)
+    I_start = x[_IDX["I"]] + I_mean
+    omega_cap = (SUBSTEP_GROWTH * math.sqrt(x[_IDX["k"]] / I_start) if I_start > 0 and x[_IDX["k"]] > 0
+                 else math.inf)
 
     def data_at(b_hz):
         if b_hz not in datas:
@@ -991,6 +1005,7 @@ def identify_output_error(t, q, q_m, u, *, fs_hz: float, measured=None, controll
         searches before the final fit)."""
         nonlocal nfev
         prob = _Problem(data_at(b_hz), law, scale, max_phase=0.15 if coarse or search else 0.05, cubic=cubic, dt=dt)
+        prob.omega_cap = omega_cap
         ftol = 1e-6 if coarse or search else 1e-10
         if noise is None or noise == "white":
             r_q, r_u = prob.raw(x_start)
@@ -1083,6 +1098,7 @@ def identify_output_error(t, q, q_m, u, *, fs_hz: float, measured=None, controll
         law, x, band, scores, noise, cost, others, nfev = hit
         x, scores, others = x.copy(), dict(scores), [(c, xs.copy()) for c, xs in others]
         prob = _Problem(data_at(band), law, scale, noise, dt=clock_offset_s)
+        prob.omega_cap = omega_cap
     else:
         law, x, band, scores, noise, cost, others, prob = _linear_fit()
         LINEAR_FITS.put(key, (law, x.copy(), band, dict(scores), noise, cost,
@@ -1137,7 +1153,7 @@ def identify_output_error(t, q, q_m, u, *, fs_hz: float, measured=None, controll
             cost_dt = float(np.sum(p_dt.fun(x_loc[p_dt.free]) ** 2))
             p_0 = _Problem(data_at(band), law, scale, ((p_dt.a_q, p_dt.s_q), (p_dt.a_u, p_dt.s_u)), cubic=prob.cubic,
                            dt=clock_offset_s)
-            p_0.free = p_dt.free.copy()
+            p_0.free, p_0.omega_cap = p_dt.free.copy(), omega_cap
             _, cost_0, n = _solve(p_0, x, 20, 1e-8)
             nfev += n
             chi2 = cost_0 - cost_dt

@@ -205,3 +205,40 @@ def test_a_second_identification_of_the_same_signals_reuses_the_linear_fit(famil
     hits.clear()
     oe_mod.identify_output_error(s.t, s.q, s.q_m, s.u * 1.01, test_cubic=False, test_hysteresis=False, **kw)
     assert hits == [False]
+
+
+def test_no_fit_of_an_identification_simulates_a_link_faster_than_its_start_allows(monkeypatch):
+    """Each fit of an output-error identification starts where the last stopped, and each problem
+    capped the link resonance at 16 x that of its own first simulation: on a light cobot whose
+    link inertia its data barely determine (hinge grid seed 23000) the inertia ratcheted down by
+    256 x per fit to 2e-10 kg m^2, 178 000 substeps per sample, a re-identification still running
+    after 27 minutes. The cap is now the identification's: a later problem whose first simulation
+    is already past 16 x the start's resonance is not simulated (NaN, a step the optimiser refuses)."""
+    from mocapfj.ident import output_error as oe
+
+    fs = 500.0
+    t = np.arange(2000) / fs
+    q_m = 0.2 * np.sin(2 * np.pi * 0.3 * t)
+    u = 5.0 * np.sin(2 * np.pi * 0.3 * t + 0.2)
+    d = oe._Data(t, q_m, u, fs, t, q_m.copy(), np.ones(t.size, bool), 0.2, 5.0)
+    x = np.zeros(len(oe.OE_NAMES))
+    x[[oe._IDX[n] for n in ("I", "J", "k", "c", "v")]] = (0.3, 0.2, 4000.0, 0.4, 0.7)
+    scale = np.ones(len(oe.OE_NAMES))
+    omega0 = math.sqrt(4000.0 / 0.3)
+    calls = []
+    real = oe.link_response
+    monkeypatch.setattr(oe, "link_response", lambda *a, **k: calls.append(k["I"]) or real(*a, **k))
+    first = oe._Problem(d, "sign", scale)
+    first.omega_cap = oe.SUBSTEP_GROWTH * omega0
+    assert np.isfinite(first.simulate(x)[0]).all()
+    # the next fit starts at a resonance 20 x the identification's start: 400 x less inertia
+    x2 = x.copy()
+    x2[oe._IDX["I"]] = 0.3 / 400.0
+    later = oe._Problem(d, "sign", scale)
+    later.omega_cap = first.omega_cap
+    assert not np.isfinite(later.simulate(x2)[0]).any()
+    assert calls == [0.3]
+    # within the cap it simulates
+    x3 = x.copy()
+    x3[oe._IDX["I"]] = 0.3 / 100.0
+    assert np.isfinite(later.simulate(x3)[0]).all()
