@@ -214,7 +214,10 @@ def joint_signals(d: Deflection, controller: ControllerLog, joint: str, *, min_v
 
     `d` is the joint's deflection from the joints stage (mocap samples on the controller clock,
     link angle zero aligned to the motor's). Gaps in the link angle of up to `max_gap_s` are filled
-    by linear interpolation (`n_filled`: a counted repair, and `measured` False there; the
+    by linear interpolation of the deflection q_m - q, the link following the logged motor angle
+    through them (of the link angle itself where the log does not reach: a 0.15 s gap at 1 rad/s
+    filled linearly missed a heavy joint's link by 10.7 mrad, 20x its deflection noise; hinge grid
+    seed 23000) (`n_filled`: a counted repair, and `measured` False there; the
     equation-error methods refuse gaps over :data:`MAX_GAP_S`, output error leaves them out); the logged motor angle and torque are
     low-passed (zero phase, 100 Hz or 0.45 x their rate) and interpolated at the mocap samples;
     samples outside the controller log are dropped. A longer gap, less than `min_valid` of the
@@ -231,7 +234,6 @@ def joint_signals(d: Deflection, controller: ControllerLog, joint: str, *, min_v
     gap, t_gap = longest_gap(t, ok)
     if gap > max_gap_s:
         raise gap_error(source, joint, gap, t_gap, max_gap_s)
-    q = np.interp(t, t[ok], q[ok])
     j = controller.joint_names.index(joint)
     for name, x in (("q_m", controller.q_m[:, j]), ("tau", controller.tau[:, j])):
         bad = ~np.isfinite(x)
@@ -247,6 +249,11 @@ def joint_signals(d: Deflection, controller: ControllerLog, joint: str, *, min_v
     cutoff = min(100.0, 0.45 * controller.rate_hz)
     q_m = controller_on(t, controller.t, controller.q_m[:, j], controller.rate_hz, cutoff)
     u = controller_on(t, controller.t, controller.tau[:, j], controller.rate_hz, cutoff)
+    q = np.interp(t, t[ok], q[ok])
+    both = ok & np.isfinite(q_m)
+    if not ok.all() and both.sum() >= 2:
+        guided = q_m - np.interp(t, t[both], (q_m - q)[both])
+        q = np.where(ok | ~np.isfinite(guided), q, guided)
     g = np.isfinite(q_m) & np.isfinite(u)
     fs = 1.0 / float(np.median(np.diff(t)))
     ctrl = controller_span(controller, j, t[g][0], t[g][-1])

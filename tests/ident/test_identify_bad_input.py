@@ -47,6 +47,29 @@ def test_a_short_gap_is_filled_and_counted(short):
     assert np.array_equal(np.delete(s.q, np.s_[500:510]), np.delete(full.q, np.s_[500:510]))
 
 
+def test_a_gap_where_the_motion_bends_follows_the_motor(short):
+    """A 0.1 s gap in a fast motion (a 3 Hz, 50 mrad swing added to the link and to the logged
+    motor angle alike, so the deflection is the recording's): the fill follows the logged motor
+    angle (the deflection interpolated, not the angle), within the angle noise (0.43 mrad RMS) of
+    the angles it replaced; a linear fill of the angle itself misses them by the swing's curvature
+    (about 20 mrad)."""
+    rec, d = short
+    j = rec.controller.joint_names.index("j2")
+    swing = lambda t: 0.05 * np.sin(2 * np.pi * 3.0 * t)       # noqa: E731
+    q_m = rec.controller.q_m.copy()
+    q_m[:, j] += swing(rec.controller.t)
+    ctrl = replace(rec.controller, q_m=q_m)
+    fast = replace(d, q=d.q + swing(d.t))
+    full = joint_signals(fast, ctrl, "j2")
+    i = int(np.argmin(np.abs(full.t - 3.0 - 1.0 / 12.0))) - 12    # around a crest of the swing
+    s = joint_signals(_with_gap(fast, i, 25), ctrl, "j2")
+    gap = np.s_[i:i + 25]
+    err = np.abs(s.q - full.q)[gap].max()
+    lin = np.interp(full.t[gap], full.t[[i - 1, i + 25]], full.q[[i - 1, i + 25]])
+    assert err < 4 * 0.43e-3
+    assert np.abs(lin - full.q[gap]).max() > 10e-3
+
+
 def test_a_long_gap_is_refused_with_where_it_is(short):
     """A 0.2 s gap: output error takes it (the link is simulated through it, its samples left
     out); motor-first, which differentiates the filled angle, refuses it with where it is; a gap
