@@ -196,7 +196,7 @@ class Judge:
         true model given, 38 % deflection fit) a clock offset of -0.03 ms fitted on the first
         70 % (its shape at 0.6 SD there) gained 3.8 SDs on the last 30 %, from the markers'
         white noise alone (the truth known: the model's own error projects at 0.00), and 0.5 SD
-        on the validation recording; together 2.4 SDs. NaN when the first part cannot be scored."""
+        on the validation recording; together 2.46 SDs. NaN when the first part cannot be scored."""
         head = self.evidence(jn, "head")
         key = (jn, id(current), "head")
         if key not in self._head:
