@@ -78,7 +78,6 @@ class Judge:
         self.gain_sds, self.min_points, self.alpha = gain_sds, min_points, alpha
         self._ev = {}
         self._base = {}
-        self._head = {}
 
     def _others(self, jn, sig, full, acc):
         m = (full.t >= sig.t[0]) & (full.t <= sig.t[-1])
@@ -116,13 +115,18 @@ class Judge:
             return [val]
         return [ev for ev in (self.evidence(jn, "tail"), val) if ev is not None]
 
-    def base(self, jn: str, model) -> dict:
-        """The current model's scores on joint jn's held-out evidence (kept per model)."""
+    def base(self, jn: str, model, evidence=None) -> dict:
+        """The current model's scores on joint jn's held-out evidence, or on `evidence` (a list of
+        Evidence), by evidence name (kept per model)."""
         key = (jn, id(model))
         if key not in self._base:
             self._base = {k: v for k, v in self._base.items() if k[0] != jn}
-            self._base[key] = {ev.name: ev.score(model) for ev in self.held_out(jn)}
-        return self._base[key]
+            self._base[key] = {}
+        scores = self._base[key]
+        for ev in self.held_out(jn) if evidence is None else evidence:
+            if ev.name not in scores:
+                scores[ev.name] = ev.score(model)
+        return scores
 
     def judge(self, jn: str, cand: Candidate, score: dict, current, n_tests: int) -> Judged:
         """Refit `cand` by output error on the trial's first part and score it on the held-out
@@ -198,11 +202,7 @@ class Judge:
         white noise alone (the truth known: the model's own error projects at 0.00), and 0.5 SD
         on the validation recording; together 2.46 SDs. NaN when the first part cannot be scored."""
         head = self.evidence(jn, "head")
-        key = (jn, id(current), "head")
-        if key not in self._head:
-            self._head = {k: v for k, v in self._head.items() if k[0] != jn}
-            self._head[key] = head.score(current)
-        b = self._head[key]
+        b = self.base(jn, current, [head])[head.name]
         a = head.score(j.model)
         if not (math.isfinite(a.fit) and math.isfinite(b.fit)):
             return math.nan

@@ -405,7 +405,7 @@ class _Problem:
     Jacobian, as functions of the free parameters (eps is fixed at 0 under the sign law)."""
 
     def __init__(self, data: _Data, law: str, scale: np.ndarray, noise=None, max_phase: float = 0.05,
-                 cubic: bool = False, dt: float = 0.0):
+                 cubic: bool = False, dt: float = 0.0, omega_cap: float = math.inf):
         self.d, self.law, self.scale, self.max_phase = data, law, scale, max_phase
         self.free = np.ones(len(OE_NAMES), bool)
         self.cubic = cubic
@@ -418,7 +418,13 @@ class _Problem:
         self._x = np.zeros(len(OE_NAMES))
         self.dt = float(dt)           # the mocap instants' offset on the controller clock, s
         self._n_first = None          # substeps per sample of the first simulation (_link)
-        self.omega_cap = math.inf     # the highest link resonance simulated, rad/s (_link)
+        self.omega_cap = omega_cap    # the highest link resonance simulated, rad/s (_link)
+
+    def sibling(self, data: _Data | None = None, noise=None, max_phase: float = 0.05, dt: float | None = None):
+        """A problem of the same identification (law, scale, spring terms, resonance cap) on `data`
+        (default this one's), under `noise`, at the clock offset `dt` (default this one's)."""
+        return _Problem(self.d if data is None else data, self.law, self.scale, noise, max_phase=max_phase,
+                        cubic=self.cubic, dt=self.dt if dt is None else dt, omega_cap=self.omega_cap)
 
     def set_noise(self, noise):
         """noise = ((a_q, sd_q), (a_u, sd_u)): the whitening filters and innovation SDs."""
@@ -655,7 +661,7 @@ def encoder_band_hz(q_m: np.ndarray, fs_hz: float, ratio: float = 10.0) -> float
     return float(f[high[-1] + 1]) if high.size and high[-1] + 1 < f.size else float(fs_hz / 2)
 
 
-def _encoder_noise_shift(q_m_c, fs_c, u_c, t_c, t, q, measured, trim_s, band, law, scale, prob, x, free,
+def _encoder_noise_shift(q_m_c, fs_c, u_c, t_c, t, q, measured, trim_s, band, prob, x, free,
                          replicates: int = 2):
     """The Gauss-Newton step from x that a second dose of the motor angle's white noise (its SD
     from the spectrum's floor, :func:`.conditioning.noise_floor_sd`) causes, averaged over
@@ -671,8 +677,7 @@ def _encoder_noise_shift(q_m_c, fs_c, u_c, t_c, t, q, measured, trim_s, band, la
     for _ in range(replicates):
         d2 = _Data(t_c, q_m_c + rng.normal(0.0, sm, q_m_c.size), u_c, fs_c, t, q, measured, trim_s, band,
                    context=prob.d.context)
-        p2 = _Problem(d2, law, scale, noise, cubic=prob.cubic, dt=prob.dt)
-        p2.omega_cap = prob.omega_cap
+        p2 = prob.sibling(d2, noise)
         J = p2.jac_full(x)[:, free]
         r = p2.fun(x[p2.free])
         sc = np.linalg.norm(J, axis=0)
@@ -701,7 +706,7 @@ def _search_split(x, run, best=None) -> tuple:
     return best
 
 
-def _wiener_drive_shift(q_m_c, fs_c, u_c, t_c, t, q, measured, trim_s, band, law, scale, prob, x, free):
+def _wiener_drive_shift(q_m_c, fs_c, u_c, t_c, t, q, measured, trim_s, band, prob, x, free):
     """How far the fit moves when the simulated link is driven by the Wiener-filtered motor angle
     (:func:`wiener_drive`) instead of the raw one: the inertia split searched again from x and from
     SPLIT_STARTS (short coarse fits), the best refined (up to 20 evaluations). (n,), zeros for
@@ -710,12 +715,11 @@ def _wiener_drive_shift(q_m_c, fs_c, u_c, t_c, t, q, measured, trim_s, band, law
     d2 = _Data(t_c, q_m_c, u_c, fs_c, t, q, measured, trim_s, band, drive=wiener_drive(q_m_c, fs_c),
                context=prob.d.context)
     noise = ((prob.a_q, prob.s_q), (prob.a_u, prob.s_u))
-    search = _Problem(d2, law, scale, noise, max_phase=0.15, cubic=prob.cubic, dt=prob.dt)
+    search = prob.sibling(d2, noise, max_phase=0.15)
     search.free = prob.free & free
-    search.omega_cap = prob.omega_cap
     best = _search_split(x, lambda xs: _solve(search, xs, 8, 1e-6)[:2])
-    p2 = _Problem(d2, law, scale, noise, cubic=prob.cubic, dt=prob.dt)
-    p2.free, p2.omega_cap = search.free, prob.omega_cap
+    p2 = prob.sibling(d2, noise)
+    p2.free = search.free
     x2, _, _ = _solve(p2, best[1], 20, 1e-8)
     return np.where(free, x2 - x, 0.0)
 
@@ -848,8 +852,8 @@ def _clock_offset_fit(prob: _Problem, x, budget: int = 30) -> tuple:
     from scipy.optimize import least_squares
 
     d = prob.d
-    p2 = _Problem(d, prob.law, prob.scale, ((prob.a_q, prob.s_q), (prob.a_u, prob.s_u)), cubic=prob.cubic)
-    p2.free, p2.omega_cap = prob.free.copy(), prob.omega_cap
+    p2 = prob.sibling(noise=((prob.a_q, prob.s_q), (prob.a_u, prob.s_u)), dt=0.0)
+    p2.free = prob.free.copy()
     f = p2.free
     lo, hi = _bounds(d)
     x = np.asarray(x, dtype=np.float64)
@@ -1004,8 +1008,8 @@ def identify_output_error(t, q, q_m, u, *, fs_hz: float, measured=None, controll
         given models. coarse or search: a 3x coarser simulation and a looser tolerance (the
         searches before the final fit)."""
         nonlocal nfev
-        prob = _Problem(data_at(b_hz), law, scale, max_phase=0.15 if coarse or search else 0.05, cubic=cubic, dt=dt)
-        prob.omega_cap = omega_cap
+        prob = _Problem(data_at(b_hz), law, scale, max_phase=0.15 if coarse or search else 0.05, cubic=cubic, dt=dt,
+                        omega_cap=omega_cap)
         ftol = 1e-6 if coarse or search else 1e-10
         if noise is None or noise == "white":
             r_q, r_u = prob.raw(x_start)
@@ -1097,8 +1101,7 @@ def identify_output_error(t, q, q_m, u, *, fs_hz: float, measured=None, controll
     if hit is not None:
         law, x, band, scores, noise, cost, others, nfev = hit
         x, scores, others = x.copy(), dict(scores), [(c, xs.copy()) for c, xs in others]
-        prob = _Problem(data_at(band), law, scale, noise, dt=clock_offset_s)
-        prob.omega_cap = omega_cap
+        prob = _Problem(data_at(band), law, scale, noise, dt=clock_offset_s, omega_cap=omega_cap)
     else:
         law, x, band, scores, noise, cost, others, prob = _linear_fit()
         LINEAR_FITS.put(key, (law, x.copy(), band, dict(scores), noise, cost,
@@ -1152,8 +1155,8 @@ def identify_output_error(t, q, q_m, u, *, fs_hz: float, measured=None, controll
             p_dt.dt = dt_abs
             cost_dt = float(np.sum(p_dt.fun(x_loc[p_dt.free]) ** 2))
             p_0 = _Problem(data_at(band), law, scale, ((p_dt.a_q, p_dt.s_q), (p_dt.a_u, p_dt.s_u)), cubic=prob.cubic,
-                           dt=clock_offset_s)
-            p_0.free, p_0.omega_cap = p_dt.free.copy(), omega_cap
+                           dt=clock_offset_s, omega_cap=omega_cap)
+            p_0.free = p_dt.free.copy()
             _, cost_0, n = _solve(p_0, x, 20, 1e-8)
             nfev += n
             chi2 = cost_0 - cost_dt
@@ -1218,7 +1221,7 @@ def identify_output_error(t, q, q_m, u, *, fs_hz: float, measured=None, controll
     # the motor angle's own noise drives the simulated link (its resonance, through the friction):
     # the shift that twice that noise would cause is measured, removed once (a first-order
     # simulation-extrapolation, Cook and Stefanski 1994) and counted in the SD
-    args = (q_m_c, fs_c, u_c, t_c, t, q, measured, trim_s, band, law, scale, prob, x, free)
+    args = (q_m_c, fs_c, u_c, t_c, t, q, measured, trim_s, band, prob, x, free)
     try:
         encoder_shift = _encoder_noise_shift(*args)
     except FloatingPointError:
