@@ -29,7 +29,7 @@ show the fit improve (issue "mismatch discovery"; docs/discovery.md).
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from scipy import stats
@@ -339,7 +339,12 @@ def _search(fams, qdd, names, tried, holdout, skip=frozenset()):
             cand = FITTERS[eff](fam, train & fam.residual(family)[1], {k: v for k, v in qdd.items() if k != jn})
             if cand is None:
                 continue
-            results.append((jn, cand, _score(cand, fam, ~train)))
+            # an effect fitted in several forms or from several starts (Candidate.starts) is
+            # ranked by its best; the others stay its starts for the output-error refit
+            scored = sorted(((_score(c, fam, ~train), i, c) for i, c in enumerate((cand, *cand.starts))),
+                            key=lambda x: (np.nan_to_num(x[0]["criterion"], nan=np.inf), x[1]))
+            best = scored[0][2]
+            results.append((jn, replace(best, starts=tuple(c for _, _, c in scored[1:])), scored[0][0]))
     return results
 
 
@@ -810,16 +815,16 @@ def _discover(signals: dict, models: dict, ahead, *, parallel: bool = True, fs_h
                 for key in [k for k in unproven if k[0] == jn]:
                     banned.discard(key)
                     unproven.pop(key)["against"] = f"the model before {cand.name} was added"
-            except InputError as e:
+            except (InputError, RuntimeError, ArithmeticError) as e:
                 # a model the equation-error residuals cannot be formed with: not kept
                 found.pop()
                 current[jn] = before
                 if validation is not None and jn in validation:
                     held_out(jn)[3].pop()
                 banned.add((jn, cand.name))
+                why = f"{e.field}: expected {e.expected}" if isinstance(e, InputError) else str(e)
                 rejected.append({"name": cand.name, "joint": jn, "parameters": cand.params,
-                                 "reason": f"its fit on the whole trial leaves residuals that cannot be formed "
-                                           f"({e.field}: expected {e.expected})"})
+                                 "reason": f"its fit on the whole trial leaves residuals that cannot be formed ({why})"})
             continue
         # the search alone (simulate=False): the clearest significant effect, by equation error
         sig = sorted((x for x in results if x[2]["explained_Nm"] >= floor[x[0]] and x[2]["p_value"] * n_tests < alpha),

@@ -134,7 +134,9 @@ class Judge:
         head = self.evidence(jn, "head")
         c = cand
         if cand.rebuild is not None:
-            c = refit(cand, current, head)[0]
+            # every start refitted; the one that fits the first part best is judged
+            fits = [refit(s, current, head) for s in (cand, *cand.starts) if s.rebuild is not None]
+            c = max(fits, key=lambda x: (x[2] if math.isfinite(x[2]) else -math.inf))[0]
         try:
             model = c.apply(current)
         except InputError as e:
