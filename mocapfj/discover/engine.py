@@ -619,10 +619,12 @@ def discover(signals: dict, models: dict, *, fs_hz: float, validation: dict | No
         the simulation on the held-out evidence (:mod:`.tournament`): named when they raise the
         held-out fit by GAIN_SDS x the noise SD of that change (or, significant at alpha, at all)
         and by WEAK_MIN_POINTS.
-    min_explained : an effect must explain, on the held-out part, a torque RMS of at least this
-        fraction of the joint's motor-torque RMS (0.3 %: 0.1 N m on a joint whose torque varies by
-        35 N m RMS; below that no engineer would change a model, and what the search finds is the
-        model compensating its own small misfits).
+    min_explained : an effect output error cannot refit must explain, on the held-out part, a
+        torque RMS of at least this fraction of the joint's motor-torque RMS (0.3 %: 0.1 N m on a
+        joint whose torque varies by 35 N m RMS; below that no engineer would change a model, and
+        what the search finds is the model compensating its own small misfits); one it can refit is
+        judged by its held-out gain whatever it explains (:func:`.tournament.pool`), and without
+        the simulation (simulate False) the floor applies to all.
     simulate : run the output-error simulations (fit before / after); False for the search alone.
     reidentify : re-identify each joint with its nominal parameters free (:mod:`.reident`): the
         effects output error fits itself, and the found ones checked against it (needs simulate).

@@ -296,11 +296,19 @@ class Judge:
 
 
 def pool(results: list, n_tests: int, floor: dict, screen: float) -> list:
-    """The step's candidates for the output-error judgement: those that explain at least `floor`
-    and are significant at `screen` (Bonferroni over `n_tests`) or refittable by output error, by
-    the equation error's held-out criterion, POOL_SIZE at most."""
-    big = [(jn, c, s) for jn, c, s in results if s["explained_Nm"] >= floor[jn]]
-    keep = [x for x in big if x[2]["p_value"] * n_tests < screen or x[1].rebuild is not None]
+    """The step's candidates for the output-error judgement, by the equation error's held-out
+    criterion, POOL_SIZE at most: those refittable by output error, and those that explain at least
+    `floor` and are significant at `screen` (Bonferroni over `n_tests`).
+
+    A refittable effect is judged however little of the equation-error residual it explains: its
+    held-out gain (WEAK_MIN_POINTS and GAIN_SDS) says whether it matters. The equation error can
+    hide an effect the simulation shows: a Coulomb asymmetry of 1.05 N m on a PA-10 joint (10 % of
+    its Coulomb friction) is a constant torque while the joint moves, which the residual's mean takes,
+    so it explained less than the floor, was never judged, and the re-identified gravity took it
+    (mgly +20 %); judged, it gains 1.59 points at an SD of 0.03 and its two asymmetries come back
+    within 3 % (hinge grid seed 24000, case 002)."""
+    keep = [(jn, c, s) for jn, c, s in results
+            if c.rebuild is not None or (s["explained_Nm"] >= floor[jn] and s["p_value"] * n_tests < screen)]
     return sorted(keep, key=lambda x: x[2]["criterion"])[:POOL_SIZE]
 
 

@@ -90,3 +90,22 @@ def test_a_hysteresis_loop_refits_its_stiffness():
     assert p["alpha"] * p["k"] == pytest.approx(a * case.k, rel=0.05), p
     assert p["k"] == pytest.approx(case.k, rel=0.2), p
     assert fit > true_fit - 0.1, (p, fit, true_fit)
+
+
+def test_a_refittable_effect_is_judged_whatever_the_equation_error_explains(pa10_hinge):
+    """The pool the simulation judges: an effect output error can refit enters it even when its
+    equation-error fit explains less than the torque floor (a Coulomb asymmetry is a constant
+    torque while the joint moves, which the residual's mean takes); one it cannot refit still needs
+    the floor and the screen."""
+    from mocapfj.discover.tournament import pool
+
+    _, s, nominal = pa10_hinge
+    fams, _ = engine._families_all({"j1": nominal}, s, s["j1"].fs_hz)
+    fam = fams["j1"]
+    asym = FITTERS["friction_asymmetry"](fam, fam.keep_s, {})
+    coupling_like = replace(asym, name="drive_gain", rebuild=None)
+    weak = {"explained_Nm": 0.01, "p_value": 0.5, "criterion": -1.0}
+    strong = {"explained_Nm": 10.0, "p_value": 1e-12, "criterion": -2.0}
+    floor = {"j1": 1.0}
+    picked = pool([("j1", asym, weak), ("j1", coupling_like, weak), ("j1", coupling_like, strong)], 3, floor, 0.01)
+    assert [(c.name, sc["explained_Nm"]) for _, c, sc in picked] == [("drive_gain", 10.0), ("friction_asymmetry", 0.01)]
