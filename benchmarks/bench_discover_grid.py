@@ -43,7 +43,7 @@ Per kind it prints:
   does not (free play on a gravity-loaded heavy joint whose trial torque never reverses): such a
   case cannot be found from its trial;
 - the gain on the validation recording against the gap between the nominal and the true model;
-- the error of a delay;
+- the error of a delay, and that error over the SD discovery reports for it;
 - failures.
 
 Goals (issue "discovery that holds"):
@@ -257,7 +257,9 @@ def run_case(args) -> dict:
                    fit_before=r["fit_before"]["j1"], fit_after=r["fit_after"]["j1"],
                    v_before=r["validation"]["fit_before"]["j1"], v_after=r["validation"]["fit_after"]["j1"],
                    v_true=tv["fit"], v_floor=tv["floor"], delay_planted_s=delay,
-                   params=r["effects"][0]["parameters"] if r["effects"] else {}, size=_size(kind, planted, delay))
+                   params=r["effects"][0]["parameters"] if r["effects"] else {},
+                   param_sds=r["effects"][0].get("parameter_sds", {}) if r["effects"] else {},
+                   size=_size(kind, planted, delay))
     except Exception as e:                                     # a failure is a result of the grid
         out["error"] = f"{type(e).__name__}: {e}"
         out["trace"] = traceback.format_exc()
@@ -322,6 +324,11 @@ def summarize(rows: list[dict]) -> list[str]:
             if errs:
                 lines.append(f"  delay error (ms): " + ", ".join(f"{e:+.2f}" for e in errs)
                              + f"; within 0.5 ms in {np.mean(np.abs(errs) <= 0.5):.0%}")
+                zs = [(r["params"]["delay_s"] - r["delay_planted_s"]) / r["param_sds"]["delay_s"] for r in ok
+                      if r["named"] and r["named"][0] == "time_delay" and (r.get("param_sds") or {}).get("delay_s")]
+                if zs:
+                    lines.append("  delay error / its SD: " + ", ".join(f"{z:+.2f}" for z in zs)
+                                 + f"; RMS {math.sqrt(np.mean(np.square(zs))):.2f}")
     return lines
 
 

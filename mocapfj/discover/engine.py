@@ -807,6 +807,8 @@ def _discover(signals: dict, models: dict, ahead, *, parallel: bool = True, fs_h
                      "candidates": [{"name": j.candidate.name, "joint": j.joint, "held_out_gain_points": j.gain,
                                      "held_out_gain_sd_points": j.sd, "admissible": j.admissible} for j in judged]}
             before = current[jn]
+            if cand.name == "time_delay":
+                score["parameter_sds"] = {"delay_s": judge.scalar_sd(jn, cand, before)}
             current[jn] = augmented
             found.append({"name": cand.name, "joint": jn, "candidate": cand, "score": score, "model": augmented,
                           "p_value": min(1.0, 2.0 * min(win.score["p_value"] * n_tests, p_oe)),
@@ -914,8 +916,9 @@ def _discover(signals: dict, models: dict, ahead, *, parallel: bool = True, fs_h
                                                                        "held_out", "whole_evidence_z", "candidates",
                                                                        "indistinguishable_from")
                                             if k in f["score"]}},
-                            "parameters": c.params, "p_value": f["p_value"],
-                            "fit_gain_pct": f.get("fit_gain_pct"), "runner_up": f["runner_up"],
+                            "parameters": c.params, **({"parameter_sds": f["score"]["parameter_sds"]}
+                                                       if "parameter_sds" in f["score"] else {}),
+                            "p_value": f["p_value"], "fit_gain_pct": f.get("fit_gain_pct"), "runner_up": f["runner_up"],
                             **({"confirmed_by_reidentification": f["confirmed"]} if "confirmed" in f else {})})
     remaining = {jn: _remaining(fams[jn], signals[jn]) for jn in names}
     for jn in fits:

@@ -20,6 +20,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
+import numpy as np
+
 from ..errors import InputError
 from .effects import FITTERS, Candidate
 from .evidence import Evidence
@@ -218,6 +220,24 @@ class Judge:
             num += (g + G) / s * w
             den += w * w
         return num / math.sqrt(den) if den > 0 else math.nan
+
+    def scalar_sd(self, jn: str, cand: Candidate, before) -> float:
+        """The SD the trial's noise gives a one-parameter candidate's parameter (theta[0]), fitted on
+        the whole trial with `before`'s parameters held: a step h of it changes the prediction by m,
+        of size G and gain SD (:func:`.compare.fit_change_sd`); the recording's estimate of the
+        share of m it holds has SD SD / (2 G), so the parameter's is h SD / (2 G) (first order, a
+        clock delay's change q' d is linear in d). NaN when it cannot be formed."""
+        if cand.rebuild is None or cand.theta is None or np.size(cand.theta) != 1:
+            return math.nan
+        ev = self.evidence(jn, "trial")
+        h = float(np.asarray(cand.steps, float)[0])
+        try:
+            a = ev.score(cand.apply(before))
+            b = ev.score(cand.rebuild(np.asarray(cand.theta, float) + h).apply(before))
+        except (InputError, RuntimeError, ArithmeticError):
+            return math.nan
+        sd, size = ev.change_sd(a, b, with_size=True)
+        return float(h * sd / (2.0 * size)) if size > 0 and math.isfinite(sd) else math.nan
 
     def _by_validation(self, j: Judged) -> bool:
         """The validation recording alone shows the gain beyond GAIN_SDS of its noise SDs and
