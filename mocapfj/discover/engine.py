@@ -41,7 +41,8 @@ from .effects import EFFECTS, FITTERS, SPRING_EFFECTS, Candidate
 from .context import ROBOT_KEY, robot_context, robot_of
 from .model import simulate_joint
 from .reident import REID_EFFECTS, robot_reidentified, train_context, train_part
-from .tournament import Judge, pool, score_dict
+from .refit import refit
+from .tournament import Judge, joint, pool, score_dict
 from .residuals import Families, families
 
 __all__ = ["Discovery", "discover", "reidentification_ahead", "locate", "effective_n", "GAP_POINTS", "GAIN_MIN_POINTS"]
@@ -456,6 +457,56 @@ def _trial_guard(names, signals, nominal, current, found, rejected, qdd, held) -
     return changed
 
 
+def _revisit(jn, judge, found, current, rejected, held_out, families_of):
+    """The first effect found on joint jn replaced by a candidate it tied with at its step, when,
+    with the second effect modelled, that candidate fits the held-out evidence better
+    (:meth:`.tournament.Judge.revisit`); both refitted on the whole trial as :meth:`Judge.finalize`
+    does. `held_out`: engine's held-out chain (validation recording), or None; `families_of`:
+    models -> (families, accelerations). Returns the new (families, accelerations), or None when
+    nothing changed."""
+    mine = [f for f in found if f["joint"] == jn]
+    if len(mine) != 2 or mine[0].get("judged") is None:
+        return None
+    first, second = mine
+    alt = judge.revisit(jn, first["before"], first["judged"], second["candidate"], current[jn])
+    if alt is None:
+        return None
+    altj, a, c2, d, sd = alt
+    base = first["before"]
+    trial = judge.evidence(jn, "trial")
+    try:
+        j = joint(a, c2, base)
+        if j is not None:
+            a, c2 = refit(j, base, trial)[0].parts
+        a_c, c2f = a, c2
+        m1 = a_c.apply(base)
+        m2 = c2f.apply(m1)
+        fams = families_of({**current, jn: m2})
+    except (InputError, RuntimeError, ArithmeticError):
+        return None
+    rejected.append({"name": first["name"], "joint": jn, "parameters": first["candidate"].params,
+                     "reason": f"it tied with {a_c.name} at its step; with {second['name']} modelled, {a_c.name} "
+                               f"fits the held-out evidence {d:+.2f} points better (SD of the difference {sd:.2f})"})
+    z = altj.z
+    p_oe = min(1.0, float(stats.norm.sf(z)) * first["n_pool"]) if np.isfinite(z) else 0.0
+    if not np.isfinite(altj.z_whole):
+        altj.z_whole = judge.whole_z(jn, altj, base)
+    first.update(name=a_c.name, candidate=a_c, model=m1, judged=None,
+                 p_value=min(1.0, 2.0 * min(altj.score["p_value"] * first["n_tests"], p_oe)),
+                 score={**altj.score, **score_dict(altj), "candidates": first["score"]["candidates"],
+                        "indistinguishable_from": [], "revisited": {"replaced": first["name"], "with": second["name"],
+                                                                    "gain_points": d, "sd_points": sd}})
+    second.update(candidate=c2f, model=m2)
+    if c2f.name == "time_delay":
+        second["score"]["parameter_sds"] = {"delay_s": judge.scalar_sd(jn, c2f, m1)}
+    current[jn] = m2
+    if held_out is not None:
+        data, others, _, chain = held_out(jn)
+        chain[-2:] = [simulate_joint(m, data.t, data.q, data.q_m, data.u, others, band_hz=chain[0].band_hz)
+                      for m in (m1, m2)]
+    return fams
+
+
 def _steps(found: list, jn: str) -> tuple[list, list]:
     """The distinct models the search went through on joint jn, in order, and the index of each
     found effect's step (effects found together share one)."""
@@ -813,7 +864,8 @@ def _discover(signals: dict, models: dict, ahead, *, parallel: bool = True, fs_h
             found.append({"name": cand.name, "joint": jn, "candidate": cand, "score": score, "model": augmented,
                           "p_value": min(1.0, 2.0 * min(win.score["p_value"] * n_tests, p_oe)),
                           "runner_up": sorted(((j.candidate.name, j.gain) for j in judged if j is not win),
-                                              key=lambda x: -x[1])[:3]})
+                                              key=lambda x: -x[1])[:3],
+                          "judged": win, "before": before, "n_tests": n_tests, "n_pool": len(cands)})
             try:
                 fams, qdd = _families_all(current, signals, fs_hz, ctx)
                 for key in [k for k in unproven if k[0] == jn]:
@@ -829,6 +881,12 @@ def _discover(signals: dict, models: dict, ahead, *, parallel: bool = True, fs_h
                 why = f"{e.field}: expected {e.expected}" if isinstance(e, InputError) else str(e)
                 rejected.append({"name": cand.name, "joint": jn, "parameters": cand.params,
                                  "reason": f"its fit on the whole trial leaves residuals that cannot be formed ({why})"})
+                continue
+            swapped = _revisit(jn, judge, found, current, rejected,
+                               held_out if validation is not None and jn in validation else None,
+                               lambda models: _families_all(models, signals, fs_hz, ctx))
+            if swapped is not None:
+                fams, qdd = swapped
             continue
         # the search alone (simulate=False): the clearest significant effect, by equation error
         sig = sorted((x for x in results if x[2]["explained_Nm"] >= floor[x[0]] and x[2]["p_value"] * n_tests < alpha),
