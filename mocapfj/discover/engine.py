@@ -972,7 +972,7 @@ def _discover(signals: dict, models: dict, ahead, *, parallel: bool = True, fs_h
                                          "explained_torque_rms_Nm": f["score"]["explained_Nm"],
                                          **{k: f["score"][k] for k in ("held_out_gain_points", "held_out_gain_sd_points",
                                                                        "held_out", "whole_evidence_z", "candidates",
-                                                                       "indistinguishable_from")
+                                                                       "indistinguishable_from", "revisited")
                                             if k in f["score"]}},
                             "parameters": c.params, **({"parameter_sds": f["score"]["parameter_sds"]}
                                                        if "parameter_sds" in f["score"] else {}),
