@@ -458,7 +458,7 @@ def _trial_guard(names, signals, nominal, current, found, rejected, qdd, held) -
 
 
 def _revisit(jn, judge, found, current, rejected, held_out, families_of):
-    """The first effect found on joint jn replaced by a candidate it tied with at its step, when,
+    """The first effect found on joint jn replaced by another candidate admissible at its step when,
     with the second effect modelled, that candidate fits the held-out evidence better
     (:meth:`.tournament.Judge.revisit`); both refitted on the whole trial as :meth:`Judge.finalize`
     does. `held_out`: engine's held-out chain (validation recording), or None; `families_of`:
@@ -485,8 +485,9 @@ def _revisit(jn, judge, found, current, rejected, held_out, families_of):
     except (InputError, RuntimeError, ArithmeticError):
         return None
     rejected.append({"name": first["name"], "joint": jn, "parameters": first["candidate"].params,
-                     "reason": f"it tied with {a_c.name} at its step; with {second['name']} modelled, {a_c.name} "
-                               f"fits the held-out evidence {d:+.2f} points better (SD of the difference {sd:.2f})"})
+                     "reason": f"{a_c.name} was admissible at its step too; with {second['name']} modelled, "
+                               f"{a_c.name} fits the held-out evidence {d:+.2f} points better (SD of the difference "
+                               f"{sd:.2f})"})
     z = altj.z
     p_oe = min(1.0, float(stats.norm.sf(z)) * first["n_pool"]) if np.isfinite(z) else 0.0
     if not np.isfinite(altj.z_whole):
