@@ -94,11 +94,13 @@ def hysteresis(fam: Families, mask, others) -> Candidate | None:
     start whose stiffness is the nominal's (:func:`_bouc_wen`)."""
     if not _linear_only(fam):
         return None
-    return with_starts(_bouc_wen(fam, mask, False), _bouc_wen(fam, mask, True))
+    paths = {}                        # the grid's state paths, the same for both fits: computed once
+    return with_starts(_bouc_wen(fam, mask, False, paths), _bouc_wen(fam, mask, True, paths))
 
 
-def _bouc_wen(fam: Families, mask, nominal_k: bool) -> Candidate | None:
-    """:func:`hysteresis`'s fit, its total stiffness free or held at the nominal's (`nominal_k`).
+def _bouc_wen(fam: Families, mask, nominal_k: bool, paths: dict) -> Candidate | None:
+    """:func:`hysteresis`'s fit, its total stiffness free or held at the nominal's (`nominal_k`);
+    `paths` {(log beta, log gamma): the low-passed state path} of the grid, shared by the two fits.
     Where the deflection's noise is as large as its swing, the regression on the rebuilt deflection
     attenuates the stiffness (errors in variables) and a free fit can find none of the loop; the
     nominal's stiffness starts the output-error refit from the right spring."""
@@ -108,16 +110,21 @@ def _bouc_wen(fam: Families, mask, nominal_k: bool) -> Candidate | None:
     ones = np.ones_like(y)
     d_lp = fam.lp(fam.d_hat)
 
-    def cols(x):
-        z = fam.lp(bouc_wen_path(fam.d_hat, 1.0, np.exp(x[0]), np.exp(x[1]), stride))
+    def cols(x, keep=False):
+        key = (float(x[0]), float(x[1]))
+        z = paths.get(key)
+        if z is None:
+            z = fam.lp(bouc_wen_path(fam.d_hat, 1.0, np.exp(x[0]), np.exp(x[1]), stride))
+            if keep:                                       # the grid's paths only (each T floats)
+                paths[key] = z
         # r_s = (kt alpha - k) delta + kt (1 - alpha) z; with kt = k, k (1 - alpha) (z - delta)
         return [z - d_lp, ones] if nominal_k else [d_lp, z, ones]
 
-    def rss(x):
-        return _ls(cols(x), y, mask)[1]
+    def rss(x, keep=False):
+        return _ls(cols(x, keep), y, mask)[1]
 
     grid = [np.log([c * f, c * (1 - f)]) for c in np.geomspace(2.0 / span, 200.0 / span, 7) for f in (0.2, 0.5, 0.8)]
-    x0 = min(grid, key=rss)
+    x0 = min(grid, key=lambda x: rss(x, keep=True))
     x = minimize(rss, x0, method="Nelder-Mead", options={"xatol": 0.01, "fatol": 1e-9, "maxfev": 80}).x
     c, _ = _ls(cols(x), y, mask)
     d_lin, k_h = (-c[0], c[0]) if nominal_k else (c[0], c[1])

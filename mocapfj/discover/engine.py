@@ -476,9 +476,7 @@ def _revisit(jn, judge, found, current, rejected, held_out, families_of):
     trial = judge.evidence(jn, "trial")
     try:
         j = joint(a, c2, base)
-        if j is not None:
-            a, c2 = refit(j, base, trial)[0].parts
-        a_c, c2f = a, c2
+        a_c, c2f = refit(j, base, trial)[0].parts if j is not None else (a, c2)
         m1 = a_c.apply(base)
         m2 = c2f.apply(m1)
         fams = families_of({**current, jn: m2})

@@ -315,6 +315,8 @@ class Judge:
         stiffening was kept, and the offset then came out 0.05 ms; with the offset modelled the
         hysteresis fits the validation recording better than the stiffening (hinge grid seed
         25000, case 005)."""
+        if not first.rivals:
+            return None
         head = self.evidence(jn, "head")
 
         def pair(a: Candidate):
