@@ -18,8 +18,12 @@ shares no code with discovery's comparison or effect library). Each case is reco
 - ``time_delay``: the controller log stamped d late, with |d| = s x deflection noise / RMS link
   velocity (the deflection error a delay leaves is q' d), either sign.
 - ``stribeck``: breakaway friction F = (c + e exp(-|q'/vs|^x)) sgn(q') + v q' with x 1 or 2,
-  vs logU(0.005, 0.1) rad/s and the excess e = s x deflection noise x k (the deflection the
-  extra link torque causes at rest), capped at c;
+  vs logU(0.005, 0.1) rad/s and the excess e sized like the others, by what it does over the
+  recording: the deflection its extra link torque causes, e RMS(exp(-|q'/vs|^x)) / k over the
+  control recording's true link velocity, is s x the deflection noise; e is capped at c. (Until
+  seed 26000 e was s x deflection noise x k, its deflection at rest, which a recording shows only
+  near its reversals: with vs = 0.006 rad/s the trial did not change (seed 25000, case 002), and
+  a third of the Stribeck cases were below VISIBLE_SDS.)
 - ``friction_asymmetry``: Coulomb c +- dc and viscous v +- dv on the two directions, the
   deflection offset between them (dc + dv RMS|q'|) / k being s x the deflection noise, a share
   U(0.5, 1) of it in dc, either sign; dc capped at c / 2, dv at v / 2;
@@ -27,7 +31,8 @@ shares no code with discovery's comparison or effect library). Each case is reco
 - ``transmission_error``: e = a1 sin(N q_m + phi1) + a2 sin(2 N q_m + phi2), phases U(0, 2 pi),
   RMS s x the deflection noise shared U(0, 1) between the orders.
 
-- ``two_effects``: two of the above at once (``PAIRS``), each sized as alone.
+- ``two_effects``: two of the above at once (``PAIRS``), each sized as alone. How far the trial
+  shows each is measured too: the true model against the true model without that effect.
 
 A planted size that a cap cuts is reported (column ``size``).
 
@@ -133,9 +138,11 @@ def _write(case, d: Path, delay_s: float = 0.0) -> dict:
 
 
 def _with_mean(stats: dict, bundle: Path) -> dict:
-    """The truth's statistics with the mean true deflection of the recording (rad)."""
+    """The truth's statistics with the mean true deflection of the recording (rad) and its true
+    link velocity (rad/s, per mocap sample)."""
     d = np.genfromtxt(bundle / "truth_mocap.csv", delimiter=",", names=True)
-    return {**stats, "deflection_mean_rad": float(np.mean(d["q_m_j1"] - d["q_j1"]))}
+    return {**stats, "deflection_mean_rad": float(np.mean(d["q_m_j1"] - d["q_j1"])),
+            "link_velocity_rad_s": np.asarray(d["qd_j1"], float)}
 
 
 def _pair(name: str) -> tuple[str, str]:
@@ -171,9 +178,11 @@ def _planted(case, kind: str, stats: dict, noise: dict, s: float, sign: float):
     rng = np.random.default_rng(np.random.SeedSequence([case.seed, 31, KINDS.index(kind)]))
     if kind == "stribeck":
         vs = float(np.exp(rng.uniform(np.log(0.005), np.log(0.1))))
-        excess = min(s * sd_n * case.k, case.c)
+        x = float(rng.choice([1.0, 2.0]))
+        share = math.sqrt(float(np.mean(np.exp(-2.0 * np.abs(stats["link_velocity_rad_s"] / vs) ** x))))
+        excess = min(s * sd_n * case.k / max(share, 1e-12), case.c)
         return replace(case, name=case.name + "_stribeck", friction_kind="stribeck",
-                       friction_params=(excess, vs, float(rng.choice([1.0, 2.0])))), 0.0
+                       friction_params=(excess, vs, x)), 0.0
     if kind == "friction_asymmetry":
         w = rng.uniform(0.5, 1.0)
         dc = min(w * s * sd_n * case.k, case.c / 2)
@@ -253,6 +262,16 @@ def run_case(args) -> dict:
         true_t = simulate_joint(true, st.t, st.q, st.q_m, st.u, band_hz=band_t)
         sd_t = nom_t.change_sd(true_t)
         out.update(t_gap=true_t.fit - nom_t.fit, t_gap_sds=(true_t.fit - nom_t.fit) / sd_t if sd_t > 0 else 0.0)
+        if kind == "two_effects":
+            # how far the trial shows each effect: the true model against the true model without it
+            stats = _with_mean(t_base["stats"], base / "control_ident")
+            each = {}
+            for k, other in zip(_pair(case.name), reversed(_pair(case.name))):
+                alone, d_alone = _planted(case, other, stats, t_base["noise"], s, sign)
+                without = simulate_joint(_models(truth, alone, d_alone)[1], st.t, st.q, st.q_m, st.u, band_hz=band_t)
+                sd_k = without.change_sd(true_t)
+                each[k] = (true_t.fit - without.fit) / sd_k if sd_k > 0 else 0.0
+            out["t_sds_each"] = each
         out.update(named=[e["name"] for e in r["effects"]], verdict=r["verdict"],
                    fit_before=r["fit_before"]["j1"], fit_after=r["fit_after"]["j1"],
                    v_before=r["validation"]["fit_before"]["j1"], v_after=r["validation"]["fit_after"]["j1"],
@@ -298,6 +317,10 @@ def summarize(rows: list[dict]) -> list[str]:
             both = [set(_pair(r["case"])) <= set(r["named"]) for r in ok]
             lines.append(f"{kind}: {len(rs)} cases, {len(rs) - len(ok)} errors; both found in {sum(both)}/{len(ok)}; "
                          + "; ".join(f"{'+'.join(_pair(r['case']))}: {','.join(r['named']) or 'none'}" for r in ok))
+            vis = [b for b, r in zip(both, ok) if min((r.get("t_sds_each") or {"": 0.0}).values()) > VISIBLE_SDS]
+            lines.append(f"  on the cases whose trial shows each effect (the true model > {VISIBLE_SDS:g} noise SDs above "
+                         f"it without that effect): {sum(vis)}/{len(vis)}; per case "
+                         + "; ".join(", ".join(f"{k} {v:.1f}" for k, v in (r.get("t_sds_each") or {}).items()) for r in ok))
             continue
         want = "none" if kind == "control" else kind
         hit = sum(f == want for f in first)
