@@ -42,7 +42,7 @@ from .context import ROBOT_KEY, robot_context, robot_of
 from .model import simulate_joint
 from .reident import REID_EFFECTS, robot_reidentified, train_context, train_part
 from .refit import refit
-from .tournament import Judge, joint, pool, score_dict
+from .tournament import JOINT_ROUNDS, Judge, joint, pool, score_dict, split_pair
 from .residuals import Families, families
 
 __all__ = ["Discovery", "discover", "reidentification_ahead", "locate", "effective_n", "GAP_POINTS", "GAIN_MIN_POINTS"]
@@ -464,11 +464,60 @@ def _trial_guard(names, signals, nominal, current, found, rejected, qdd, held) -
     return changed
 
 
+def _prior(found: list, jn: str):
+    """(candidate, the model it was added to) of the one effect found on joint jn so far, when
+    output error can refit it; else None (:meth:`.tournament.Judge.judge`)."""
+    mine = [f for f in found if f["joint"] == jn]
+    if len(mine) != 1 or mine[0]["candidate"].rebuild is None or mine[0]["candidate"].theta is None:
+        return None
+    return mine[0]["candidate"], mine[0]["before"]
+
+
+def _together(judge, jn: str, pair, base):
+    """A pair admitted together (:meth:`.tournament.Judge.judge`) refitted on the whole trial from
+    its fit on the first part: (first candidate, second candidate, base with the first, base with
+    both); the first part's fit when the whole trial's cannot be applied."""
+    for p in (refit(pair, base, judge.evidence(jn, "trial"), rounds=JOINT_ROUNDS)[0], pair):
+        try:
+            a, b = p.parts
+            m1 = a.apply(base)
+            return a, b, m1, b.apply(m1)
+        except InputError:
+            continue
+    a, b = pair.parts
+    m1 = a.apply(base)
+    return a, b, m1, b.apply(m1)
+
+
+def _pair_sds(judge, jn, first: dict, second: dict, a, b, base) -> None:
+    """Two effects' parameter SDs taken together (:func:`.tournament.split_pair`), in their entries'
+    scores; each with the other held when the pair cannot be formed."""
+    pj = joint(a, b, base)
+    if pj is None:
+        _with_sds(first["score"], *judge.parameter_sds(jn, a, base, b.apply))
+        _with_sds(second["score"], *judge.parameter_sds(jn, b, a.apply(base)))
+        return
+    for f, sds in zip((first, second), split_pair(*judge.parameter_sds(jn, pj, base))):
+        _with_sds(f["score"], *sds)
+
+
+def _with_sds(score: dict, sds: dict, undetermined: dict) -> None:
+    """An effect's parameter SDs and the parameters the trial does not determine, in its score
+    (:meth:`.tournament.Judge.parameter_sds`); none kept from an earlier fit."""
+    score.pop("parameter_sds", None)
+    score.pop("not_determined", None)
+    if sds:
+        score["parameter_sds"] = sds
+    if undetermined:
+        score["not_determined"] = undetermined
+
+
 def _revisit(jn, judge, found, current, rejected, held_out, families_of):
     """The first effect found on joint jn replaced by another candidate admissible at its step when,
-    with the second effect modelled, that candidate fits the held-out evidence better
-    (:meth:`.tournament.Judge.revisit`); both refitted on the whole trial as :meth:`Judge.finalize`
-    does. `held_out`: engine's held-out chain (validation recording), or None; `families_of`:
+    with the second effect modelled, that candidate fits the held-out evidence better, or else the
+    two effects refitted together when that fits it better than as found (the first's
+    `refitted_with`; :meth:`.tournament.Judge.revisit`); both refitted on the whole trial as
+    :meth:`Judge.finalize` does. `held_out`: engine's held-out chain (validation recording), or None; `families_of`:
     models -> (families, accelerations). Returns the new (families, accelerations), or None when
     nothing changed."""
     mine = [f for f in found if f["joint"] == jn]
@@ -483,12 +532,30 @@ def _revisit(jn, judge, found, current, rejected, held_out, families_of):
     trial = judge.evidence(jn, "trial")
     try:
         j = joint(a, c2, base)
-        a_c, c2f = refit(j, base, trial)[0].parts if j is not None else (a, c2)
+        a_c, c2f = refit(j, base, trial, rounds=JOINT_ROUNDS)[0].parts if j is not None else (a, c2)
         m1 = a_c.apply(base)
         m2 = c2f.apply(m1)
         fams = families_of({**current, jn: m2})
     except (InputError, RuntimeError, ArithmeticError):
         return None
+    if altj is first["judged"]:
+        # the same two effects, refitted together
+        first.update(candidate=a_c, model=m1)
+        first["score"]["refitted_with"] = {"name": second["name"], "gain_points": d, "sd_points": sd}
+        second.update(candidate=c2f, model=m2)
+    else:
+        _replace_first(first, second, altj, a_c, c2f, m1, m2, d, sd, rejected, judge, jn, base)
+    _pair_sds(judge, jn, first, second, a_c, c2f, base)
+    current[jn] = m2
+    if held_out is not None:
+        data, others, _, chain = held_out(jn)
+        chain[-2:] = [simulate_joint(m, data.t, data.q, data.q_m, data.u, others, band_hz=chain[0].band_hz)
+                      for m in (m1, m2)]
+    return fams
+
+
+def _replace_first(first, second, altj, a_c, c2f, m1, m2, d, sd, rejected, judge, jn, base) -> None:
+    """The first effect's entry replaced by the rival `altj` (refitted as a_c, the second as c2f)."""
     rejected.append({"name": first["name"], "joint": jn, "parameters": first["candidate"].params,
                      "reason": f"{a_c.name} was admissible at its step too; with {second['name']} modelled, "
                                f"{a_c.name} fits the held-out evidence {d:+.2f} points better (SD of the difference "
@@ -503,14 +570,6 @@ def _revisit(jn, judge, found, current, rejected, held_out, families_of):
                         "indistinguishable_from": [], "revisited": {"replaced": first["name"], "with": second["name"],
                                                                     "gain_points": d, "sd_points": sd}})
     second.update(candidate=c2f, model=m2)
-    if c2f.name == "time_delay":
-        second["score"]["parameter_sds"] = {"delay_s": judge.scalar_sd(jn, c2f, m1)}
-    current[jn] = m2
-    if held_out is not None:
-        data, others, _, chain = held_out(jn)
-        chain[-2:] = [simulate_joint(m, data.t, data.q, data.q_m, data.u, others, band_hz=chain[0].band_hz)
-                      for m in (m1, m2)]
-    return fams
 
 
 def _steps(found: list, jn: str) -> tuple[list, list]:
@@ -841,7 +900,7 @@ def _discover(signals: dict, models: dict, ahead, *, parallel: bool = True, fs_h
             if not cands:
                 stop = "no further effect is significant"
                 break
-            judged = [judge.judge(jn, c, sc, current[jn], n_tests) for jn, c, sc in cands]
+            judged = [judge.judge(jn, c, sc, current[jn], n_tests, prior=_prior(found, jn)) for jn, c, sc in cands]
             for j in judged:
                 if not j.admissible:
                     key = (j.joint, j.candidate.name)
@@ -857,9 +916,24 @@ def _discover(signals: dict, models: dict, ahead, *, parallel: bool = True, fs_h
             jn = win.joint
             if not np.isfinite(win.z_whole):                 # reported for every effect named
                 win.z_whole = judge.whole_z(jn, win, current[jn])
-            cand, augmented = judge.finalize(win, fams, qdd, current)
+            restore = None
+            if win.together is not None:
+                # admitted refitted together with the joint's first effect: both refitted on the
+                # whole trial, the first effect's entry updated
+                prev = next(f for f in found if f["joint"] == jn)
+                restore = (prev, dict(prev), dict(prev["score"]))
+                p_c, cand, m1, augmented = _together(judge, jn, win.together, prev["before"])
+                prev.update(candidate=p_c, model=m1)
+                prev["score"]["refitted_with"] = {"name": cand.name, "gain_points": win.gain, "sd_points": win.sd}
+                current[jn] = m1
+            else:
+                cand, augmented = judge.finalize(win, fams, qdd, current)
             if validation is not None and jn in validation:
                 data, others, where, chain = held_out(jn)
+                if restore is not None:
+                    restore += (chain[-1],)
+                    chain[-1] = simulate_joint(current[jn], data.t, data.q, data.q_m, data.u, others,
+                                               band_hz=chain[0].band_hz)
                 chain.append(simulate_joint(augmented, data.t, data.q, data.q_m, data.u, others,
                                             band_hz=chain[0].band_hz))
             z = win.z
@@ -868,8 +942,11 @@ def _discover(signals: dict, models: dict, ahead, *, parallel: bool = True, fs_h
                      "candidates": [{"name": j.candidate.name, "joint": j.joint, "held_out_gain_points": j.gain,
                                      "held_out_gain_sd_points": j.sd, "admissible": j.admissible} for j in judged]}
             before = current[jn]
-            if cand.name == "time_delay":
-                score["parameter_sds"] = {"delay_s": judge.scalar_sd(jn, cand, before)}
+            if restore is None:
+                _with_sds(score, *judge.parameter_sds(jn, cand, before))
+            else:
+                prev = restore[0]
+                _pair_sds(judge, jn, prev, {"score": score}, prev["candidate"], cand, prev["before"])
             current[jn] = augmented
             found.append({"name": cand.name, "joint": jn, "candidate": cand, "score": score, "model": augmented,
                           "p_value": min(1.0, 2.0 * min(win.score["p_value"] * n_tests, p_oe)),
@@ -884,9 +961,16 @@ def _discover(signals: dict, models: dict, ahead, *, parallel: bool = True, fs_h
             except (InputError, RuntimeError, ArithmeticError) as e:
                 # a model the equation-error residuals cannot be formed with: not kept
                 found.pop()
+                if restore is not None:                     # the first effect as it was
+                    prev, entry, sc = restore[:3]
+                    prev.clear()
+                    prev.update(entry, score=sc)
+                    before = prev["model"]
                 current[jn] = before
                 if validation is not None and jn in validation:
                     held_out(jn)[3].pop()
+                    if restore is not None:
+                        held_out(jn)[3][-1] = restore[3]
                 banned.add((jn, cand.name))
                 why = f"{e.field}: expected {e.expected}" if isinstance(e, InputError) else str(e)
                 rejected.append({"name": cand.name, "joint": jn, "parameters": cand.params,
@@ -982,10 +1066,10 @@ def _discover(signals: dict, models: dict, ahead, *, parallel: bool = True, fs_h
                                          "explained_torque_rms_Nm": f["score"]["explained_Nm"],
                                          **{k: f["score"][k] for k in ("held_out_gain_points", "held_out_gain_sd_points",
                                                                        "held_out", "whole_evidence_z", "candidates",
-                                                                       "indistinguishable_from", "revisited")
+                                                                       "indistinguishable_from", "revisited", "refitted_with")
                                             if k in f["score"]}},
-                            "parameters": c.params, **({"parameter_sds": f["score"]["parameter_sds"]}
-                                                       if "parameter_sds" in f["score"] else {}),
+                            "parameters": c.params,
+                            **{k: f["score"][k] for k in ("parameter_sds", "not_determined") if k in f["score"]},
                             "p_value": f["p_value"], "fit_gain_pct": f.get("fit_gain_pct"), "runner_up": f["runner_up"],
                             **({"confirmed_by_reidentification": f["confirmed"]} if "confirmed" in f else {})})
     remaining = {jn: _remaining(fams[jn], signals[jn]) for jn in names}
