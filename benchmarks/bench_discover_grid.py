@@ -48,7 +48,9 @@ Per kind it prints:
   does not (free play on a gravity-loaded heavy joint whose trial torque never reverses): such a
   case cannot be found from its trial;
 - the gain on the validation recording against the gap between the nominal and the true model;
-- the error of a delay, and that error over the SD discovery reports for it;
+- the error of a delay, and that error over the SD discovery reports for it; the same for the
+  main parameters of a transmission error, a Stribeck friction, a free play, a hysteresis and a
+  friction asymmetry (the named effect's, against the planted ones);
 - failures.
 
 Goals (issue "discovery that holds"):
@@ -305,6 +307,31 @@ def _size(kind, case, delay):
     return {}
 
 
+_PARAM_NAMES = {"transmission_error": "amplitudes", "stribeck": "excess", "backlash": "gap",
+                "hysteresis": "alpha", "friction_asymmetry": "Coulomb asymmetry"}
+
+
+def _param_zs(kind: str, r: dict) -> list[float]:
+    """The named effect's main parameters' errors over the SDs discovery reports for them (the
+    planted values from the case's size), for the kinds whose parameters match the planted ones."""
+    p, sd, size = r.get("params") or {}, r.get("param_sds") or {}, r.get("size") or {}
+    try:
+        if kind == "transmission_error":
+            return [(a - 1e-6 * size[k]) / s for a, k, s in zip(p["amplitudes_rad"], ("a1_urad", "a2_urad"),
+                                                               sd["amplitudes_rad"]) if s > 0]
+        if kind == "stribeck":
+            return [((p["fs"] - p["fc"]) - size["excess_Nm"]) / sd["fs"]]
+        if kind == "backlash":
+            return [(p["gap_rad"] - 1e-3 * size["gap_mrad"]) / sd["gap_rad"]]
+        if kind == "hysteresis":
+            return [(p["alpha"] - size["alpha"]) / sd["alpha"]]
+        if kind == "friction_asymmetry":
+            return [((p["c_pos"] - p["c_neg"]) / 2 - size["dc_Nm"]) / sd["c_pos"]]
+    except (KeyError, TypeError, ZeroDivisionError):
+        return []
+    return []
+
+
 def summarize(rows: list[dict]) -> list[str]:
     lines = []
     for kind in KINDS:
@@ -341,6 +368,10 @@ def summarize(rows: list[dict]) -> list[str]:
                 rec = np.array(rec)
                 lines.append(f"  validation gain / (true - nominal) for named cases: median {np.nanmedian(rec):.0%}, "
                              f"min {np.nanmin(rec):.0%}; at least half in {np.mean(rec >= 0.5):.0%}")
+        zs = [z for r in ok if r["named"] and r["named"][0] == kind for z in _param_zs(kind, r)]
+        if zs and kind != "time_delay":
+            lines.append(f"  {_PARAM_NAMES[kind]} error / its SD: " + ", ".join(f"{z:+.2f}" for z in zs)
+                         + f"; RMS {math.sqrt(np.mean(np.square(zs))):.2f}")
         if kind == "time_delay":
             errs = [1e3 * (r["params"].get("delay_s", float("nan")) - r["delay_planted_s"]) for r in ok
                     if r["named"] and r["named"][0] == "time_delay"]

@@ -485,56 +485,64 @@ def drive_gain(fam: Families, mask, others) -> Candidate | None:
 # ---------------------------------------------------------------- link residual
 
 def stribeck(fam: Families, mask, others) -> Candidate | None:
-    """Breakaway friction above Coulomb at low speed, (fs - fc) exp(-(q'/vs)^2) sign(q') (Oueslati et al. (2012)
-    eq. 7), vs by variable projection."""
+    """Breakaway friction above Coulomb at low speed, (fs - fc) exp(-|q'/vs|^x) sign(q') (Oueslati et
+    al. (2012) eq. 7), x = 2 (Gaussian) or 1 (exponential), vs by variable projection."""
     cv = _coulomb(fam)
     if cv is None:
         return None
     qd = fam.qd_hat
     y = fam.r_l
     eps = fam.model.friction.smoothing          # the nominal law's own smoothing (a tanh law stays one)
-
-    def cols(vs):
-        return [fam.lp(np.exp(-(qd / vs) ** 2) * np.sign(qd)), np.ones_like(y)]
-
-    # a Stribeck velocity well above the speeds left out of the link residual (0.005 rad/s),
-    # where smooth pre-sliding friction, not the Stribeck drop, shapes the torque
-    vmin = 0.01
-    vss = np.geomspace(vmin, 0.3, 15)
-    v0 = min(vss, key=lambda v: _ls(cols(v), y, mask)[1])
-    vs = float(np.exp(minimize_scalar(lambda lv: _ls(cols(np.exp(lv)), y, mask)[1],
-                                      bounds=(np.log(max(vmin, v0 / 1.5)), np.log(v0 * 1.5)), method="bounded").x))
-    c, _ = _ls(cols(vs), y, mask)
-    # r_l = tau_s - (I q'' + G + F_nominal) = F_true - F_nominal = (fs - fc) exp(-(q'/vs)^2) sign(q')
-    peak = float(c[0])
-    if not peak > 0:
-        return None
     fc, fv = cv
-    contribution = np.column_stack(cols(vs)) @ c
 
-    def build(th):
+    def cols(vs, x):
+        return [fam.lp(np.exp(-np.abs(qd / vs) ** x) * np.sign(qd)), np.ones_like(y)]
+
+    def build(th, x, contribution):
         peak, vs = float(fc * np.exp(th[0]) if fc > 0 else np.exp(th[0])), float(np.exp(th[1]))
-        params = {"fs": fc + peak, "fc": fc, "vs": vs, "fv": fv}
+        params = {"fs": fc + peak, "fc": fc, "vs": vs, "fv": fv, "exponent": x}
         loc = {"signal": "link torque", "where": f"low speed, |q'| < {3 * vs:.3g} rad/s, both signs",
                "velocity_rad_s": vs, "excess_Nm": peak}
 
         def explain(g):
             return (f"At low speed (|q'| below about {3 * vs:.3g} rad/s, on both signs) the joint needs "
                     f"{peak:.2f} N m more than Coulomb plus viscous friction predict, falling off over a Stribeck "
-                    f"velocity of {vs:.3g} rad/s: the breakaway friction of the lubricated gear and bearing "
-                    f"contacts (static {fc + peak:.2f} N m vs sliding {fc:.2f} N m, Oueslati et al. (2012), eq. 7).")
+                    f"velocity of {vs:.3g} rad/s (exponent {x:g}): the breakaway friction of the lubricated gear "
+                    f"and bearing contacts (static {fc + peak:.2f} N m vs sliding {fc:.2f} N m, Oueslati et al. "
+                    f"(2012), eq. 7).")
         return Candidate("stribeck", "link", params, 2, contribution,
-                         lambda m: m.with_(friction=Stribeck(fc=fc, fs=fc + peak, vs=vs, fv=fv, smoothing=eps)), loc,
-                         explain,
-                         np.asarray(th, float), np.array([0.5, 0.5]), build)
-    # output error starts from a grid about the equation error's excess and vs (the tournament
-    # refits the best few, tournament.SCAN_KEEP): a simulated breakaway friction sticks and slips
-    # where it sticks, and its fit is rough in vs. On a 60 s PA-10 recording with 9.3 N m at
-    # 0.019 rad/s the fit is 97.6 % there, 94.3 % at 0.014 and 93.7 % at 0.034; the equation
-    # error's start (5.6 N m, 0.025 rad/s) refitted to 95.5 % (benchmarks/bench_discover_speed.py)
-    th = np.array([np.log(peak / fc if fc > 0 else peak), np.log(vs)])
-    grid = [th + [np.log(a), np.log(b)] for a in (1.0, 0.5, 1.5, 2.0, 3.0) for b in 2.0 ** np.linspace(-1, 1, 7)]
-    return with_starts(*(build(g) for g in grid))
+                         lambda m: m.with_(friction=Stribeck(fc=fc, fs=fc + peak, vs=vs, fv=fv, exponent=x,
+                                                             smoothing=eps)), loc,
+                         explain, np.asarray(th, float), np.array([0.5, 0.5]),
+                         lambda t: build(t, x, contribution))
+
+    # a Stribeck velocity well above the speeds left out of the link residual (0.005 rad/s),
+    # where smooth pre-sliding friction, not the Stribeck drop, shapes the torque
+    vmin = 0.01
+    vss = np.geomspace(vmin, 0.3, 15)
+    forms = []
+    for x in (2.0, 1.0):
+        v0 = min(vss, key=lambda v: _ls(cols(v, x), y, mask)[1])
+        vs = float(np.exp(minimize_scalar(lambda lv: _ls(cols(np.exp(lv), x), y, mask)[1],
+                                          bounds=(np.log(max(vmin, v0 / 1.5)), np.log(v0 * 1.5)), method="bounded").x))
+        c, rss = _ls(cols(vs, x), y, mask)
+        # r_l = tau_s - (I q'' + G + F_nominal) = F_true - F_nominal = (fs - fc) exp(-|q'/vs|^x) sign(q')
+        peak = float(c[0])
+        if peak > 0:
+            forms.append((rss, x, np.log(peak / fc if fc > 0 else peak), np.log(vs), np.column_stack(cols(vs, x)) @ c))
+    if not forms:
+        return None
+    # output error starts from a grid about each form's equation-error excess and vs (the
+    # tournament refits the few that fit best as they are, tournament.SCAN_KEEP): a simulated
+    # breakaway friction sticks and slips where it sticks, and its fit is rough in vs. On a 60 s
+    # PA-10 recording with 9.3 N m at 0.019 rad/s the fit is 97.6 % there, 94.3 % at 0.014 and
+    # 93.7 % at 0.034; the equation error's start (5.6 N m, 0.025 rad/s) refitted to 95.5 %
+    # (benchmarks/bench_discover_speed.py). The grid plants both exponents.
+    forms.sort(key=lambda f: f[0])
+    starts = [build(np.array([le + np.log(a), lv + np.log(b)]), x, contribution)
+              for _, x, le, lv, contribution in forms
+              for a in (1.0, 0.5, 2.0, 3.0, 1.5) for b in 2.0 ** np.array([0.0, -1.0, -0.5, 0.5, 1.0])]
+    return with_starts(*starts)
 
 
 def friction_asymmetry(fam: Families, mask, others) -> Candidate | None:
