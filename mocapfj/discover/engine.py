@@ -517,8 +517,8 @@ def _revisit(jn, judge, found, current, rejected, held_out, families_of):
     with the second effect modelled, that candidate fits the held-out evidence better, or else the
     two effects refitted together when that fits it better than as found (the first's
     `refitted_with`; :meth:`.tournament.Judge.revisit`); both refitted on the whole trial as
-    :meth:`Judge.finalize` does. `held_out`: engine's held-out chain (validation recording), or None; `families_of`:
-    models -> (families, accelerations). Returns the new (families, accelerations), or None when
+    :meth:`Judge.finalize` does. `held_out`: engine's held-out chain (validation recording), or
+    None; `families_of`: models -> (families, accelerations). Returns the new (families, accelerations), or None when
     nothing changed."""
     mine = [f for f in found if f["joint"] == jn]
     if len(mine) != 2 or mine[0].get("judged") is None:
