@@ -42,7 +42,7 @@ from .context import ROBOT_KEY, robot_context, robot_of
 from .model import simulate_joint
 from .reident import REID_EFFECTS, robot_reidentified, train_context, train_part
 from .refit import refit
-from .tournament import JOINT_ROUNDS, Judge, joint, pool, score_dict, split_pair
+from .tournament import Judge, joint, pool, score_dict, split_pair
 from .residuals import Families, families
 
 __all__ = ["Discovery", "discover", "reidentification_ahead", "locate", "effective_n", "GAP_POINTS", "GAIN_MIN_POINTS"]
@@ -477,7 +477,7 @@ def _together(judge, jn: str, pair, base):
     """A pair admitted together (:meth:`.tournament.Judge.judge`) refitted on the whole trial from
     its fit on the first part: (first candidate, second candidate, base with the first, base with
     both); the first part's fit when the whole trial's cannot be applied."""
-    for p in (refit(pair, base, judge.evidence(jn, "trial"), rounds=JOINT_ROUNDS)[0], pair):
+    for p in (refit(pair, base, judge.evidence(jn, "trial"))[0], pair):
         try:
             a, b = p.parts
             m1 = a.apply(base)
@@ -532,7 +532,7 @@ def _revisit(jn, judge, found, current, rejected, held_out, families_of):
     trial = judge.evidence(jn, "trial")
     try:
         j = joint(a, c2, base)
-        a_c, c2f = refit(j, base, trial, rounds=JOINT_ROUNDS)[0].parts if j is not None else (a, c2)
+        a_c, c2f = refit(j, base, trial)[0].parts if j is not None else (a, c2)
         m1 = a_c.apply(base)
         m2 = c2f.apply(m1)
         fams = families_of({**current, jn: m2})

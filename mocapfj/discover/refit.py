@@ -27,8 +27,6 @@ __all__ = ["refit", "MAX_EVALS_PER_PARAMETER"]
 
 MAX_EVALS_PER_PARAMETER = 8
 """Simulations per parameter of an output-error refit (its Jacobian's included)."""
-ROUND_POINTS = 0.01
-"""A further round of :func:`refit` is made while the last raised the fit by more than this."""
 REACH = 10.0
 """A refit moves each parameter at most this many of its steps from the equation-error start (a
 stiffness by a factor e, a free play's width by e^5): a stiffness run away by a few hundred times
@@ -43,26 +41,10 @@ def _model_of(cand: Candidate, theta, model):
         return None, None
 
 
-def refit(cand: Candidate, model, ev: Evidence, rounds: int = 1) -> tuple[Candidate, float, float]:
+def refit(cand: Candidate, model, ev: Evidence) -> tuple[Candidate, float, float]:
     """(candidate refitted, fit of `model` with the candidate as given, fit with the refitted one)
     on the evidence `ev`; the candidate unchanged when it has no parameter vector or the refit
-    does not raise the fit (module docstring). With `rounds` > 1 the refit starts again from its
-    result while it raises the fit by more than ROUND_POINTS, `rounds` times at most: two effects
-    refitted together can have far to go (a hysteresis that had taken part of a clock offset's
-    lag, alpha 0.25 against 0.7)."""
-    c, f0, f1 = _refit(cand, model, ev)
-    for _ in range(rounds - 1):
-        if not (math.isfinite(f1) and f1 > f0 + ROUND_POINTS):
-            break
-        c, _, f2 = _refit(c, model, ev)
-        if not f2 > f1 + ROUND_POINTS:
-            f1 = max(f1, f2)
-            break
-        f1 = f2
-    return c, f0, f1
-
-
-def _refit(cand: Candidate, model, ev: Evidence) -> tuple[Candidate, float, float]:
+    does not raise the fit (module docstring)."""
     if cand.rebuild is None or cand.theta is None:
         return cand, math.nan, math.nan
     th0 = np.asarray(cand.theta, dtype=np.float64)
