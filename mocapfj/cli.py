@@ -311,6 +311,18 @@ def _cmd_identify(args) -> int:
     return 0
 
 
+def _with_sds_text(params: dict, sds: dict) -> str:
+    """"name value +- SD" for each parameter with an SD (list-valued ones item by item)."""
+    out = []
+    for k, sd in sds.items():
+        v = params.get(k)
+        if isinstance(sd, list) and isinstance(v, list):
+            out.append(f"{k} " + ", ".join(f"{a:.4g} +- {b:.2g}" for a, b in zip(v, sd)))
+        elif isinstance(v, (int, float)):
+            out.append(f"{k} {v:.4g} +- {sd:.2g}")
+    return "; ".join(out)
+
+
 def _cmd_discover(args) -> int:
     from .pipeline import run_discover
 
@@ -321,6 +333,11 @@ def _cmd_discover(args) -> int:
         for e in s["effects"]:
             lines.append(f"  {e['name']} on {e['joint']} (p = {e['p_value']:.1e}, fit {e['fit_gain_pct']:+.2f} %): "
                          f"{e['explanation']}")
+            if e.get("parameter_sds"):
+                lines.append("    parameters +- SD (the trial's noise, the effect's form and the other parameters "
+                             "given): " + _with_sds_text(e["parameters"], e["parameter_sds"]))
+            for name, why in (e.get("not_determined") or {}).items():
+                lines.append(f"    {name} not determined: {why}")
         for j in s["fit_before"]:
             f = s["fits"][j]["after"]
             line = (f"  {j}: fit {s['fit_before'][j]:.2f} % -> {s['fit_after'][j]:.2f} % (noise floor {f['floor']:.2f} %, "

@@ -84,3 +84,13 @@ def test_console_script_runs(tmp_path):
                        capture_output=True, text=True)
     assert r.returncode == 2 and r.stdout == ""
     assert r.stderr.strip().endswith("got no such path") and r.stderr.count("\n") == 1
+
+
+def test_discover_prints_each_parameter_with_its_sd():
+    """The discover command's text gives each found effect's parameters with their SDs, a list's
+    items one by one, and leaves out the parameters without one."""
+    from mocapfj.cli import _with_sds_text
+
+    text = _with_sds_text({"amplitudes_rad": [2.612e-4, 1.868e-4], "gear_ratio": 50.0, "vs": 0.0194},
+                          {"amplitudes_rad": [5.4e-6, 5.6e-6], "vs": 2.2e-4})
+    assert text == "amplitudes_rad 0.0002612 +- 5.4e-06, 0.0001868 +- 5.6e-06; vs 0.0194 +- 0.00022"
