@@ -156,11 +156,10 @@ class Judge:
         fitted while a 1.7 ms clock offset was not modelled takes part of its lag (alpha 0.82 and
         beta 3.4 gamma, planted 0.7 and gamma), and the offset fitted on it then lowered the
         validation recording's fit by 0.43 points (hinge grid seed 26000, case 005). The pair is
-        judged against the effect found before refitted alone the same way (:meth:`_alone`), or as the
-        pair refitted it, when either fits better: a Stribeck friction refitted with a stiffening
-        spring left its local optimum and gained 4 points, which the spring would otherwise have
-        claimed. Admitted so, the Judged carries the pair in
-        `together`."""
+        judged against the effect found before refitted alone the same way (:meth:`_alone`), or
+        as the pair refitted it, when either fits better: a Stribeck friction refitted with a
+        stiffening spring left its local optimum and gained 4 points, which the spring would
+        otherwise have claimed. Admitted so, the Judged carries the pair in `together`."""
         head = self.evidence(jn, "head")
         c = cand
         if cand.rebuild is not None:
@@ -315,7 +314,8 @@ class Judge:
         the trial cannot be simulated with it. `after`: a model -> model applied after the
         candidate (a second effect held). A pair (:func:`joint`) gets both effects' SDs together
         (:func:`split_pair`): a hysteresis and a clock offset share a lag, and each one's SD with
-        the other held was 6 times short of its error."""
+        the other held was 6 times short of its error (taken together still 3-5 times: along such
+        a ridge first order is not enough; docs/discovery.md, "Parameter SDs")."""
         if cand.rebuild is None or cand.theta is None:
             return {}, {}
         ev = self.evidence(jn, "trial")
