@@ -947,6 +947,8 @@ def _discover(signals: dict, models: dict, ahead, *, parallel: bool = True, fs_h
             else:
                 prev = restore[0]
                 _pair_sds(judge, jn, prev, {"score": score}, prev["candidate"], cand, prev["before"])
+            if win.forms and cand.params.get(next(iter(win.forms))) == win.candidate.params.get(next(iter(win.forms))):
+                score["not_determined"] = {**score.get("not_determined", {}), **win.forms}
             current[jn] = augmented
             found.append({"name": cand.name, "joint": jn, "candidate": cand, "score": score, "model": augmented,
                           "p_value": min(1.0, 2.0 * min(win.score["p_value"] * n_tests, p_oe)),

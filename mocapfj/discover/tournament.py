@@ -45,7 +45,10 @@ ones, and 2 planted ones their recordings barely show (a Stribeck friction the v
 fits 1.4 SDs worse with; a free play at 0.2 SDs of its trial)."""
 SCAN_KEEP = 3
 """Starts of a candidate refitted by output error when it has more: those that fit the trial's first
-part best as they are (a grid of Stribeck velocities and excesses)."""
+part best as they are (a grid of Stribeck velocities and excesses), and the best of each other
+form (FORM_KEYS)."""
+FORM_KEYS = ("exponent",)
+"""Parameters that name a candidate's form rather than measure it (a Stribeck law's exponent)."""
 TIE_SDS = 2.0
 """Two candidates tie when the leader's held-out fit exceeds the other's by no more than this many
 noise SDs of their difference."""
@@ -58,7 +61,8 @@ class Judged:
     (their sum) and `sd` (its SD), `z_whole` (the shape's z on all the evidence, the trial's first
     part with it; :meth:`Judge.whole_z`), `admissible`, and why not (`reason`); `together`: the
     candidate refitted with the effect found before it on the joint (:func:`joint`), when it was
-    admitted so (:meth:`Judge.judge`)."""
+    admitted so (:meth:`Judge.judge`); `forms`: {parameter: why} for a discrete form the trial's
+    first part does not decide (:func:`_forms`)."""
 
     joint: str
     candidate: Candidate
@@ -70,6 +74,7 @@ class Judged:
     z_whole: float = math.nan
     rivals: list = field(default_factory=list, repr=False)
     together: object = field(default=None, repr=False)
+    forms: dict = field(default_factory=dict, repr=False)
     gain: float = math.nan
     sd: float = math.nan
     admissible: bool = False
@@ -167,15 +172,27 @@ class Judge:
             # there are more); the one that fits the first part best is judged
             starts = [s for s in (cand, *cand.starts) if s.rebuild is not None]
             if len(starts) > SCAN_KEEP:
-                starts = sorted(starts, key=lambda s: -_fit_or_inf(head, s, current))[:SCAN_KEEP]
+                ranked = sorted(starts, key=lambda s: -_fit_or_inf(head, s, current))
+                starts = ranked[:SCAN_KEEP]
+                # and the best start of each other form (a Stribeck law's other exponent)
+                for key in FORM_KEYS:
+                    seen = {s.params.get(key) for s in starts}
+                    for s in ranked[SCAN_KEEP:]:
+                        if s.params.get(key) not in seen:
+                            starts.append(s)
+                            seen.add(s.params.get(key))
             fits = [refit(s, current, head) for s in starts]
             c = max(fits, key=lambda x: (x[2] if math.isfinite(x[2]) else -math.inf))[0]
+            forms = _forms(head, fits, c, current)
+        else:
+            forms = {}
         try:
             model = c.apply(current)
         except InputError as e:
             return Judged(jn, c, score, None, reason=f"its fit is not physical ({e.field} = {e.got}, expected "
                                                         f"{e.expected}): the residual it followed is left as found")
         j = self._assess(jn, c, score, model, current, n_tests)
+        j.forms = forms
         if j.admissible or prior is None or c.rebuild is None:
             return j
         pc, pbase = prior
@@ -563,6 +580,31 @@ def score_dict(j: Judged) -> dict:
             "held_out": {n: {"gain_points": g, "sd_points": s, "size_points": j.sizes.get(n)}
                          for n, (g, s) in j.gains.items()},
             **({"whole_evidence_z": j.z_whole} if math.isfinite(j.z_whole) else {})}
+
+
+def _forms(head: Evidence, fits: list, c: Candidate, current) -> dict:
+    """{form parameter: why} when a refitted start of another form (FORM_KEYS) fits the trial's
+    first part within TIE_SDS noise SDs of the difference of the chosen one: the recordings do not
+    tell the forms apart, and the chosen one's parameters hold given its form. On a heavy joint an
+    exponential Stribeck law (218 N m at 0.053 rad/s) fits as well as the planted Gaussian one
+    (140 N m at 0.081 rad/s; hinge grid seed 25000, case 005)."""
+    out = {}
+    for key in FORM_KEYS:
+        mine = c.params.get(key)
+        other = [x for x in fits if x[0].params.get(key, mine) != mine and math.isfinite(x[2])]
+        if mine is None or not other:
+            continue
+        alt = max(other, key=lambda x: x[2])[0]
+        try:
+            a, b = head.score(alt.apply(current)), head.score(c.apply(current))
+        except InputError:
+            continue
+        d, sd = b.fit - a.fit, head.change_sd(a, b)
+        if math.isfinite(sd) and d <= TIE_SDS * sd:
+            out[key] = (f"{key} {alt.params[key]:g} fits the trial's first part {d:.2f} points below {key} "
+                        f"{mine:g} (noise SD {sd:.2f}): the recordings do not tell them apart, and the other "
+                        "parameters hold for this form")
+    return out
 
 
 def _fit_or_inf(ev: Evidence, c: Candidate, model) -> float:
