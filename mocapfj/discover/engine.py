@@ -921,7 +921,8 @@ def _discover(signals: dict, models: dict, ahead, *, parallel: bool = True, fs_h
                 # admitted refitted together with the joint's first effect: both refitted on the
                 # whole trial, the first effect's entry updated
                 prev = next(f for f in found if f["joint"] == jn)
-                restore = (prev, dict(prev), dict(prev["score"]))
+                # what to put back if the pair's model cannot be kept
+                restore = {"entry": prev, "was": dict(prev), "score": dict(prev["score"]), "sim": None}
                 p_c, cand, m1, augmented = _together(judge, jn, win.together, prev["before"])
                 prev.update(candidate=p_c, model=m1)
                 prev["score"]["refitted_with"] = {"name": cand.name, "gain_points": win.gain, "sd_points": win.sd}
@@ -931,7 +932,7 @@ def _discover(signals: dict, models: dict, ahead, *, parallel: bool = True, fs_h
             if validation is not None and jn in validation:
                 data, others, where, chain = held_out(jn)
                 if restore is not None:
-                    restore += (chain[-1],)
+                    restore["sim"] = chain[-1]
                     chain[-1] = simulate_joint(current[jn], data.t, data.q, data.q_m, data.u, others,
                                                band_hz=chain[0].band_hz)
                 chain.append(simulate_joint(augmented, data.t, data.q, data.q_m, data.u, others,
@@ -945,9 +946,9 @@ def _discover(signals: dict, models: dict, ahead, *, parallel: bool = True, fs_h
             if restore is None:
                 _with_sds(score, *judge.parameter_sds(jn, cand, before))
             else:
-                prev = restore[0]
+                prev = restore["entry"]
                 _pair_sds(judge, jn, prev, {"score": score}, prev["candidate"], cand, prev["before"])
-            if win.forms and cand.params.get(next(iter(win.forms))) == win.candidate.params.get(next(iter(win.forms))):
+            if win.forms:                   # the whole trial's refit keeps the form (rebuild holds it)
                 score["not_determined"] = {**score.get("not_determined", {}), **win.forms}
             current[jn] = augmented
             found.append({"name": cand.name, "joint": jn, "candidate": cand, "score": score, "model": augmented,
@@ -964,15 +965,15 @@ def _discover(signals: dict, models: dict, ahead, *, parallel: bool = True, fs_h
                 # a model the equation-error residuals cannot be formed with: not kept
                 found.pop()
                 if restore is not None:                     # the first effect as it was
-                    prev, entry, sc = restore[:3]
+                    prev = restore["entry"]
                     prev.clear()
-                    prev.update(entry, score=sc)
+                    prev.update(restore["was"], score=restore["score"])
                     before = prev["model"]
                 current[jn] = before
                 if validation is not None and jn in validation:
                     held_out(jn)[3].pop()
                     if restore is not None:
-                        held_out(jn)[3][-1] = restore[3]
+                        held_out(jn)[3][-1] = restore["sim"]
                 banned.add((jn, cand.name))
                 why = f"{e.field}: expected {e.expected}" if isinstance(e, InputError) else str(e)
                 rejected.append({"name": cand.name, "joint": jn, "parameters": cand.params,

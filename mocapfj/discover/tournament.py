@@ -101,6 +101,7 @@ class Judge:
         self.gain_sds, self.min_points, self.alpha = gain_sds, min_points, alpha
         self._ev = {}
         self._base = {}
+        self._alone_key, self._alone_model = None, None
 
     def _others(self, jn, sig, full, acc):
         m = (full.t >= sig.t[0]) & (full.t <= sig.t[-1])
@@ -219,7 +220,7 @@ class Judge:
         alone on the trial's first part the same way when that fits the held-out evidence better,
         so that the pair's gain is the second effect's, not pc's own refit (kept per step)."""
         key = (jn, id(pc), id(pbase), id(current))
-        if getattr(self, "_alone_key", None) != key:
+        if self._alone_key != key:
             best = current
             try:
                 m = refit(pc, pbase, self.evidence(jn, "head"))[0].apply(pbase)
