@@ -172,7 +172,10 @@ def test_the_first_step_is_decided_again_once_a_second_effect_is_modelled(monkey
     a validation recording with new noise. The first step is made to keep the stiffening spring,
     as its tie-break did on the grid (stiffening, free play and hysteresis 0.2 points apart at an
     SD of 0.39). Once the offset is modelled, the hysteresis is refitted with it and replaces the
-    stiffening, beyond 2 SDs of the difference, and the offset comes back within 10 %."""
+    stiffening, beyond 2 SDs of the difference, and the offset comes back within 10 %. The check
+    that a spring effect is more than a change of stiffness (tournament.Judge._beyond_stiffness)
+    is off here: it rejects this stiffening at the first step (0.06 points over the stiffness
+    refitted alone, SD 0.04), and the hysteresis is then chosen there directly (offset 0.213 ms)."""
     from mocapfj.discover import tournament
     from mocapfj.dynamics import shift_signal
     from mocapfj.synth.hinge import sample_cases
@@ -198,6 +201,7 @@ def test_the_first_step_is_decided_again_once_a_second_effect_is_modelled(monkey
         return pick, others
 
     monkeypatch.setattr(tournament.Judge, "choose", keep_stiffening)
+    monkeypatch.setattr(tournament.Judge, "_beyond_stiffness", lambda self, j, current: j)
     d = engine.discover(s, {"j1": nominal_of(case)}, fs_hz=s["j1"].fs_hz, reidentify=False, validation=v)
     names = [e["name"] for e in d.effects]
     assert names == ["hysteresis", "time_delay"], (names, d.rejected)
