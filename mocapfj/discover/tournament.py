@@ -63,8 +63,9 @@ class Judged:
     part with it; :meth:`Judge.whole_z`), `admissible`, and why not (`reason`); `together`: the
     candidate refitted with the effect found before it on the joint (:func:`joint`), when it was
     admitted so (:meth:`Judge.judge`); `forms`: {parameter: why} for a discrete form the trial's
-    first part does not decide (:func:`_forms`); `by_stiffness`: not admitted because the linear
-    spring with its stiffness refitted fits as well (:meth:`Judge._beyond_stiffness`)."""
+    first part does not decide (:func:`_forms`); `by_stiffness`: the linear spring with its
+    stiffness refitted fits as well (:meth:`Judge._beyond_stiffness`; what
+    `indistinguishable_from` reports of it), None when it does not or was not tried."""
 
     joint: str
     candidate: Candidate
@@ -81,7 +82,7 @@ class Judged:
     sd: float = math.nan
     admissible: bool = False
     reason: str = ""
-    by_stiffness: bool = False
+    by_stiffness: dict | None = None
 
     @property
     def z(self) -> float:
@@ -259,7 +260,9 @@ class Judge:
             z = self.whole_z(jn, js, stiff)
             if z >= self.gain_sds:
                 return j
-        j.admissible, j.by_stiffness = False, True
+        j.admissible = False
+        j.by_stiffness = {"name": "stiffness", "held_out_gain_points": self.difference(jn, scores, self.base(jn, current))[0],
+                          "difference_points": d, "difference_sd_points": sd, "k": k}
         whole = f"; the whole evidence shows it beyond that at {z:.2f} SDs" if math.isfinite(z) else ""
         j.reason = (f"the model with only its spring's stiffness refitted ({current.spring.k:.4g} -> {k:.4g} N m/rad) "
                     f"fits the held-out recordings within {d:+.2f} points of it (SD {sd:.2f}){whole}: its gain is a "
