@@ -149,7 +149,9 @@ def test_ctrl_c_and_sigterm_print_one_line_and_leave_nothing(bundle, tmp_path, s
     # 3 s trial at once, which under load could end the run before the signal lands)
     p = subprocess.Popen([sys.executable, "-m", "mocapfj.cli", "identify", str(bundle), "--out", str(out),
                           "--method", "two_step"],
-                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                         preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+    # (a suite started in the background inherits SIGINT ignored, and a Python started so keeps it)
     deadline = time.monotonic() + 60
     while not list(tmp_path.glob(".o.*.mocapfj-tmp")) and p.poll() is None and time.monotonic() < deadline:
         time.sleep(0.02)

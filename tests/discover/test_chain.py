@@ -136,7 +136,9 @@ def test_ctrl_c_while_the_worker_runs_leaves_no_process_and_nothing_written(tmp_
     out = ident.parent / "out"
     p = subprocess.Popen([sys.executable, "-m", "mocapfj.cli", "discover", str(ident), "--out", str(out), "--model",
                           str(ROOT / "datasets" / "suite" / "hysteresis_ident.toml")],
-                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
+                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True,
+                         preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+    # (a suite started in the background inherits SIGINT ignored, and a Python started so keeps it)
     deadline = time.monotonic() + 120
     while not _children(p.pid) and p.poll() is None and time.monotonic() < deadline:
         time.sleep(0.05)
