@@ -421,14 +421,7 @@ class Judge:
             w = 1.0 / (2.0 * n * sd_y ** 2)
             H += w * (A.T @ A)
             M += w ** 2 * sigma ** 2 / g * (A.T @ A)
-        # a direction the prediction does not change along (a free play refitted to a zero gap,
-        # whose log-gap step moves nothing) is not determined: a pseudo-inverse would give it no
-        # variance at all (its SD came out 1.6e-26 rad for that gap)
-        w, V = np.linalg.eigh(H)
-        good = w > 1e-10 * max(float(w.max()), 0.0)
-        Hi = (V[:, good] / w[good]) @ V[:, good].T
-        null = V[:, ~good]
-        cov = Hi @ M @ Hi
+        cov, null = sandwich(H, M)
         flat = [_flat(c) for c in cands]
         keys = [k for k in flat[0] if all(k in f for f in flat)]
         J = np.array([[(flat[i + 1][k] - flat[0][k]) / h[i] for i in range(th.size)] for k in keys])
@@ -688,6 +681,17 @@ def _flat(c) -> dict:
     if isinstance(c, _Joint):
         return {f"{i}:{k}": v for i, p in enumerate(c.parts) for k, v in _numbers(p.params).items()}
     return _numbers(c.params)
+
+
+def sandwich(H: np.ndarray, M: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(H^-1 M H^-1 on the directions H determines, the directions it does not as columns). A
+    direction the prediction does not change along (a free play refitted to a zero gap, whose
+    log-gap step moves nothing) is not determined; a pseudo-inverse would give it no variance at
+    all (that gap's SD came out 1.6e-26 rad)."""
+    w, V = np.linalg.eigh(H)
+    good = w > 1e-10 * max(float(w.max()), 0.0)
+    Hi = (V[:, good] / w[good]) @ V[:, good].T
+    return Hi @ M @ Hi, V[:, ~good]
 
 
 def split_pair(sds: dict, undetermined: dict) -> tuple[tuple[dict, dict], tuple[dict, dict]]:

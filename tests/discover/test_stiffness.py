@@ -34,3 +34,18 @@ def test_a_wrong_nominal_stiffness_is_reported_as_such_not_as_an_effect():
     e = d.effects[0]
     k, sd = e["parameters"]["k"], e["parameter_sds"]["k"]
     assert abs(k - case.k) < 3.0 * sd, (k, sd, case.k)
+
+
+def test_a_direction_the_fit_does_not_move_is_not_given_a_variance():
+    """The parameter SDs' sandwich H^-1 M H^-1 (tournament.Judge.parameter_sds): where H is singular
+    (the prediction does not change along a direction) that direction is returned as not
+    determined, not given the zero variance a pseudo-inverse gives it (np.linalg.pinv(H) @ M @
+    pinv(H) is 0 there); the determined one keeps its variance (M / H^2 = 4 / 2^2 = 1)."""
+    import numpy as np
+
+    from mocapfj.discover.tournament import sandwich
+
+    H = np.array([[2.0, 0.0], [0.0, 0.0]])
+    M = np.array([[4.0, 0.0], [0.0, 0.0]])
+    cov, null = sandwich(H, M)
+    assert cov[0, 0] == 1.0 and null.shape == (2, 1) and abs(abs(null[1, 0]) - 1.0) < 1e-12
