@@ -1018,9 +1018,6 @@ def _discover(signals: dict, models: dict, ahead, *, parallel: bool = True, fs_h
                           "runner_up": sorted(((j.candidate.name, j.gain) for j in judged if j is not win),
                                               key=lambda x: -x[1])[:3],
                           "judged": win, "before": before, "n_tests": n_tests, "n_pool": len(cands)})
-            if cand.name in OWN_STIFFNESS:
-                _superseded_stiffness(found, jn, cand, rejected,
-                                      held_out(jn)[3] if validation is not None and jn in validation else None)
             try:
                 fams, qdd = _families_all(current, signals, fs_hz, ctx)
                 for key in [k for k in unproven if k[0] == jn]:
@@ -1044,6 +1041,9 @@ def _discover(signals: dict, models: dict, ahead, *, parallel: bool = True, fs_h
                 rejected.append({"name": cand.name, "joint": jn, "parameters": cand.params,
                                  "reason": f"its fit on the whole trial leaves residuals that cannot be formed ({why})"})
                 continue
+            if cand.name in OWN_STIFFNESS:
+                _superseded_stiffness(found, jn, cand, rejected,
+                                      held_out(jn)[3] if validation is not None and jn in validation else None)
             swapped = _revisit(jn, judge, found, current, rejected,
                                held_out if validation is not None and jn in validation else None,
                                lambda models: _families_all(models, signals, fs_hz, ctx))
