@@ -240,7 +240,7 @@ def stiffness_change(spring: LinearSpring, scale: float = 1.0, contribution=None
     return build(np.array([np.log(scale)]))
 
 
-def stiffness(fam: Families, mask, others) -> Candidate | None:
+def stiffness(fam: Families, mask) -> Candidate | None:
     """:func:`stiffness_change` from the model's k, and from the equation error's change of k
     (r_s = dk delta + c) as another start. That regression on the rebuilt deflection is attenuated
     where its noise is as large as its swing (errors in variables): on a heavy joint whose

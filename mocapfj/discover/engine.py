@@ -494,7 +494,7 @@ def _stiffness_judged(judge, judged: list, fams: dict, current: dict, holdout: f
         fam = fams[jn]
         train = np.zeros(fam.t.size, bool)
         train[: int(fam.t.size * (1 - holdout))] = True
-        cand = effects_stiffness(fam, train & fam.residual("spring")[1], None)
+        cand = effects_stiffness(fam, train & fam.residual("spring")[1])
         if cand is None:
             continue
         j = judge.judge(jn, cand, _score(cand, fam, ~train), current[jn], n_tests, prior=_prior(found, jn))
@@ -705,7 +705,7 @@ def _reidentification(jn, s, nominal, current, found, rejected, held_out, on_val
                 spring_r = bool(names_r & {"stiffening", "hysteresis"})
                 keep, model = [], R.model
                 for f in mine:
-                    clash = (f["name"] in names_r or (spring_r and f["name"] in ("stiffening", "hysteresis", "backlash", "stiffness"))
+                    clash = (f["name"] in names_r or (spring_r and f["name"] in (*OWN_STIFFNESS, "stiffness"))
                              or (f["name"] == "time_delay" and "time_delay" in names_r))
                     if clash:
                         rejected.append({"name": f["name"], "joint": jn, "parameters": f["candidate"].params,
