@@ -39,7 +39,10 @@ A planted size that a cap cuts is reported (column ``size``).
 Each recording has a validation recording: the same joint and effect, a new excitation (new
 harmonic amplitudes and phases at the same f0 and peak) and new noise. Discovery runs as a lab
 would run it: ``mocapfj discover IDENT --model NOMINAL --validation VALID``. NOMINAL is the case's
-true parameters without the effect, so a control's nominal is its true model.
+true parameters without the effect, so a control's nominal is its true model. With ``--spot``
+there is no model file: ``mocapfj discover IDENT --validation VALID``, the nominal model identified
+on the spot from the trial (motor-first, a linear spring), as a lab without a model runs it; the
+gap on validation is then the true model's fit over that identified one's.
 
 Per kind it prints:
 - named first, and how often the named effect is the planted one; again on the cases whose trial
@@ -221,7 +224,7 @@ def _models(truth: dict, case, delay_s: float):
 
 def run_case(args) -> dict:
     """Generate (cached) and run one case of one kind."""
-    case, kind, root, s, sign, reuse = args
+    case, kind, root, s, sign, reuse, spot = args
     import mocapfj
     from mocapfj.discover import write_model_file
     from mocapfj.discover.model import simulate_joint
@@ -244,14 +247,15 @@ def run_case(args) -> dict:
         mfile = base / f"{kind}_nominal.toml"
         write_model_file(mfile, [nominal])
         tic = time.perf_counter()
-        done = base / f"{kind}_out" / "discovery.json"
+        outdir = base / f"{kind}_{'spot_' if spot else ''}out"
+        done = outdir / "discovery.json"
         if reuse and done.exists():                  # a discovery an interrupted run finished
             from mocapfj.io import read_json
 
             r = read_json(done)
             out["seconds"] = float("nan")
         else:
-            r = run_discover(ident, base / f"{kind}_out", model=mfile, validation=valid)
+            r = run_discover(ident, outdir, model=None if spot else mfile, validation=valid)
             out["seconds"] = time.perf_counter() - tic
         sv = mocapfj.signals(valid)["j1"]
         band = r["validation"]["fits"]["j1"]["before"]["band_hz"]            # the nominal model's band
@@ -397,6 +401,9 @@ def main(argv=None) -> int:
     ap.add_argument("--only-done", action="store_true",
                     help="with --reuse: the table of the cases and kinds an earlier run finished, nothing run")
     ap.add_argument("--cache", type=Path, default=ROOT / "benchmarks" / ".cache" / "discover_grid")
+    ap.add_argument("--spot", action="store_true",
+                    help="no model file: the nominal model identified on the spot from the trial, as "
+                         "`mocapfj discover IDENT --validation VALID` does (module docstring)")
     args = ap.parse_args(argv)
 
     from mocapfj.synth.hinge import sample_cases
@@ -408,16 +415,19 @@ def main(argv=None) -> int:
     for i, c in enumerate(cases):
         for k in kinds:        # a kind's size depends on (seed, case, kind) alone
             rng = np.random.default_rng(np.random.SeedSequence([args.base_seed, i, KINDS.index(k)]))
-            jobs.append((c, k, root, float(rng.uniform(0.3, 0.8)), float(rng.choice([-1.0, 1.0])), args.reuse))
+            jobs.append((c, k, root, float(rng.uniform(0.3, 0.8)), float(rng.choice([-1.0, 1.0])), args.reuse,
+                         args.spot))
     if args.only_done:
-        jobs = [j for j in jobs if (root / j[0].name / f"{j[1]}_out" / "discovery.json").exists()]
+        jobs = [j for j in jobs if (root / j[0].name / f"{j[1]}_{'spot_' if args.spot else ''}out"
+                                    / "discovery.json").exists()]
     tic = time.perf_counter()
     # one worker per case's kinds in order: the control bundle is written before the others use it
     with ProcessPoolExecutor(args.jobs) as ex:
         first = list(ex.map(run_case, [j for j in jobs if j[1] == kinds[0]]))
         rest = list(ex.map(run_case, [j for j in jobs if j[1] != kinds[0]]))
     rows = first + rest
-    print(f"discovery grid: {len(cases)} cases x {len(kinds)} kinds, base seed {args.base_seed}, "
+    print(f"discovery grid{' (nominal identified on the spot)' if args.spot else ''}: {len(cases)} cases x "
+          f"{len(kinds)} kinds, base seed {args.base_seed}, "
           f"{time.perf_counter() - tic:.0f} s wall on {args.jobs} processes")
     print(f"{'case':20s} {'family':8s} {'kind':11s} {'s':>4s} {'named':28s} {'fit before->after':>18s} "
           f"{'valid before->after':>20s} {'true':>6s} {'floor':>6s} {'t_sds':>6s} {'sec':>5s}  size")

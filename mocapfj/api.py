@@ -231,6 +231,8 @@ def discover(rec: RecordingLike, *, model=None, validation: RecordingLike | None
         models = joint_models(model, list(sig))
     val = signals(val_rec, validation_calibration) if val_rec is not None else None
     fs = next(iter(sig.values())).fs_hz
+    if model is None:
+        kw.setdefault("nominal_from_trial", True)
     return _discover(sig, models, fs_hz=fs, validation=val, **kw)
 
 

@@ -58,7 +58,10 @@ class Families:
     deflection), q_hat, qd_hat, qdd_hat (rebuilt link angle and its derivatives), r_s, r_l (the
     two residuals, N m, low-passed at RESIDUAL_HZ), keep_s, keep_l (samples used: inside the trims;
     the link residual also leaves out |q'| < 0.005 rad/s), q_zero_rad (zero correction added to
-    the recorded deflection), k (the spring's linear equivalent), fs_hz, model.
+    the recorded deflection), k (the spring's linear equivalent), fs_hz, model, motor ((T, 2): the
+    motor's acceleration and velocity as r_s carries them, low-passed at RESIDUAL_HZ: how an error
+    of the nominal J and b enters the spring residual, -dJ q_m'' - db q_m'; None unless asked for,
+    :func:`families`' `motor_free`).
     """
 
     t: np.ndarray
@@ -79,6 +82,7 @@ class Families:
     k: float
     fs_hz: float
     model: JointModel
+    motor: np.ndarray | None
 
     def lp(self, x: np.ndarray) -> np.ndarray:
         """The residuals' low-pass (RESIDUAL_HZ), for a regressor formed at full band."""
@@ -108,10 +112,11 @@ def _link_torque(model: JointModel, q, qd, qdd, context=None) -> np.ndarray:
 
 
 def families(model: JointModel, t, q, q_m, u, *, fs_hz: float, others_qdd: dict | None = None,
-             trim_s: float = 1.0) -> Families:
+             trim_s: float = 1.0, motor_free: bool = False) -> Families:
     """The spring and link residuals of `model` on one joint's recorded signals (mocap clock).
     others_qdd : {joint: (T,) rad/s^2} the other joints' accelerations (the model's coupling
-    terms) and, for a robot's joint, the robot's context (:data:`.context.ROBOT_KEY`)."""
+    terms) and, for a robot's joint, the robot's context (:data:`.context.ROBOT_KEY`). motor_free:
+    keep the motor's columns (Families.motor) for the spring effects' fits."""
     t, q, q_m, u = (np.asarray(a, dtype=np.float64) for a in (t, q, q_m, u))
     if not (t.shape == q.shape == q_m.shape == u.shape and t.ndim == 1):
         raise InputError(None, "t, q, q_m, u", "four (T,) arrays", [a.shape for a in (t, q, q_m, u)])
@@ -163,4 +168,6 @@ def families(model: JointModel, t, q, q_m, u, *, fs_hz: float, others_qdd: dict 
     moving = np.convolve(moving.astype(float), np.ones(5), mode="same") >= 5
     return Families(t=t, q=q, q_m=qmf, u=uf, tau_s=tau_s, delta=delta + e, d_hat=d_hat, q_hat=q_hat, qd_hat=qd,
                     qdd_hat=qdd, r_s=lowpass(r_s_full, fs_hz, RESIDUAL_HZ), r_l=lowpass(r_l_full, fs_hz, RESIDUAL_HZ),
-                    keep_s=inner, keep_l=inner & moving, q_zero_rad=e, k=k, fs_hz=fs_hz, model=model)
+                    keep_s=inner, keep_l=inner & moving, q_zero_rad=e, k=k, fs_hz=fs_hz, model=model,
+                    motor=np.column_stack([lowpass(qmdd, fs_hz, RESIDUAL_HZ), lowpass(qmd, fs_hz, RESIDUAL_HZ)])
+                    if motor_free else None)

@@ -31,7 +31,7 @@ from .evidence import Evidence
 from .refit import refit
 from .reident import segment
 
-__all__ = ["Judged", "Judge", "pool", "score_dict", "split_pair", "CONFIRM_SDS", "POOL_SIZE", "LOSS_SDS", "TIE_SDS"]
+__all__ = ["Judged", "Judge", "chain", "pool", "score_dict", "split_pair", "split_parts", "CONFIRM_SDS", "POOL_SIZE", "LOSS_SDS", "TIE_SDS"]
 
 POOL_SIZE = 5
 """Candidates judged by output error per search step (the equation error's lowest criteria)."""
@@ -598,33 +598,55 @@ class Judge:
 
 @dataclass(frozen=True, eq=False)
 class _Joint:
-    """Two candidates' parameters refitted together (:func:`joint`): `parts` the two candidates at
-    `theta`, applied on `base`."""
+    """Candidates' parameters refitted together (:func:`joint`, :func:`chain`): `parts` the
+    candidates at `theta` (`sizes` their parameter counts), applied on `base` in order."""
 
     parts: tuple
     theta: np.ndarray
     steps: np.ndarray
     base: object
-    split: int
+    sizes: tuple
 
     def rebuild(self, th):
         th = np.asarray(th, float)
-        a, b = self.parts
-        return _Joint((a.rebuild(th[:self.split]), b.rebuild(th[self.split:])), th, self.steps, self.base, self.split)
+        ends = np.cumsum(self.sizes)
+        parts = tuple(p.rebuild(th[e - n:e]) for p, n, e in zip(self.parts, self.sizes, ends))
+        return _Joint(parts, th, self.steps, self.base, self.sizes)
 
     def apply(self, model=None):
-        a, b = self.parts
-        return b.apply(a.apply(self.base))
+        m = self.base
+        for p in self.parts:
+            m = p.apply(m)
+        return m
+
+    @property
+    def params(self) -> dict:
+        return {f"{i}:{k}": v for i, p in enumerate(self.parts) for k, v in p.params.items()}
+
+
+def chain(cands, base):
+    """`cands` as one candidate for :func:`.refit.refit` (their parameter vectors joined, applied on
+    `base` in order), or None when one has no parameter vector."""
+    if any(c.rebuild is None or c.theta is None for c in cands):
+        return None
+    ths = [np.asarray(c.theta, float) for c in cands]
+    return _Joint(tuple(cands), np.concatenate(ths), np.concatenate([np.asarray(c.steps, float) for c in cands]),
+                  base, tuple(t.size for t in ths))
 
 
 def joint(a: Candidate, b: Candidate, base):
     """a and b as one candidate for :func:`.refit.refit` (their parameter vectors joined, applied
     on `base`, a then b), or None when either has no parameter vector."""
-    if a.rebuild is None or b.rebuild is None or a.theta is None or b.theta is None:
-        return None
-    ta, tb = np.asarray(a.theta, float), np.asarray(b.theta, float)
-    return _Joint((a, b), np.concatenate([ta, tb]), np.concatenate([np.asarray(a.steps, float),
-                                                                    np.asarray(b.steps, float)]), base, ta.size)
+    return chain((a, b), base)
+
+
+def split_parts(sds: dict, undetermined: dict, n: int) -> list[tuple[dict, dict]]:
+    """:meth:`Judge.parameter_sds` of a :func:`chain` of n as (SDs, not determined) of each."""
+    out = []
+    for i in map(str, range(n)):
+        out.append(({k.split(":", 1)[1]: v for k, v in sds.items() if k.split(":", 1)[0] == i},
+                    {k.split(":", 1)[1]: v for k, v in undetermined.items() if k.split(":", 1)[0] == i}))
+    return out
 
 
 def pool(results: list, n_tests: int, floor: dict, screen: float) -> list:
@@ -707,11 +729,8 @@ def sandwich(H: np.ndarray, M: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 def split_pair(sds: dict, undetermined: dict) -> tuple[tuple[dict, dict], tuple[dict, dict]]:
     """:meth:`Judge.parameter_sds` of a pair (:func:`joint`) as (SDs, not determined) of each."""
-    out = []
-    for i in ("0", "1"):
-        out.append(({k.split(":", 1)[1]: v for k, v in sds.items() if k.split(":", 1)[0] == i},
-                    {k.split(":", 1)[1]: v for k, v in undetermined.items() if k.split(":", 1)[0] == i}))
-    return out[0], out[1]
+    a, b = split_parts(sds, undetermined, 2)
+    return a, b
 
 
 def _numbers(params: dict) -> dict:
