@@ -654,7 +654,7 @@ def _steps(found: list, jn: str) -> tuple[list, list]:
     return models, index
 
 
-def _refit_with_nominal(jn, judge, nominal, found, current, rejected, held_out) -> dict | None:
+def _refit_with_nominal(jn, judge, nominal, found, current, rejected, held_out, from_trial: bool = False) -> dict | None:
     """The effects found on joint jn refitted by output error together with the nominal model's
     own parameters (:func:`.effects.nominal_parameters`), and adopted when that fits the held-out
     evidence better by TIE_SDS noise SDs of the difference (no held-out recording losing more than
@@ -662,17 +662,25 @@ def _refit_with_nominal(jn, judge, nominal, found, current, rejected, held_out) 
     model identified on the spot with a linear spring has taken up what it could of the effects
     (a PA-10 with a hysteresis: b -20 %, v +33 %, k -29 %), and an effect fitted on it makes up
     for that error, with an effect more to help: there a hysteresis and a 0.62 ms clock offset
-    that was never planted, 97.94 % on the validation recording. Refitted together (3 s), the
-    offset came back to -0.05 ms, b, v, k within 3-5 % of the truth, alpha 0.73 for 0.7, and the
-    validation fit 98.38 %, the true model's (hinge grid seed 31000, case 000, `--spot`).
+    that was never planted, 97.94 % on the validation recording. Refitted together, the offset
+    adds nothing and is rejected; b, v and I come back within 1-2 % of the truth, alpha 0.711 +-
+    0.019 for 0.7, and the validation fit is 98.57 %, the true model's (hinge grid seed 31000,
+    case 000, `--spot`).
 
     Fitted on the trial when a validation recording holds the evidence out, else on its first
-    part and judged on the rest, then refitted on the whole trial. Adopted, each effect's entry
-    takes its refitted candidate and model, and its parameter SDs come from the refit of them all
-    (the nominal parameters' share of the trial's information counted). Then an effect whose
-    removal (the others and the nominal parameters refitted again) leaves the held-out fit within
-    TIE_SDS SDs is rejected: it made up for the nominal model's error. Returns the report
-    (`reidentified`'s `refitted_with_effects`), or None when nothing was refitted."""
+    part and judged on the rest, then refitted on the whole trial. An effect whose removal (the
+    others and the nominal parameters refitted again) leaves the held-out fit within TIE_SDS SDs
+    of the refit of them all, and no worse than the model as the search left it, is rejected: it
+    made up for the nominal model's error (one at most). Only when the refit is adopted or the
+    nominal model was identified on this trial (`from_trial`): a model from elsewhere is evidence
+    of its own, and a clock offset reads in the band as a change of viscous friction (step 5): on
+    a PA-10 with a hysteresis and a 0.62 ms offset, the true nominal given, the refit moved
+    b and v to take the offset and fitted the validation recording within noise without it
+    (seed 31000, case 005). Adopted, each effect's entry takes its
+    refitted candidate and model, and its parameter SDs come from the refit of them all (the
+    nominal parameters' share of the trial's information counted). Returns the report
+    (`reidentified`'s `refitted_with_effects`), or None when nothing was refitted. Not for
+    effects found together as a pair, nor a robot's joints."""
     mine = [f for f in found if f["joint"] == jn]
     if not mine or any(f.get("candidate") is None or f["candidate"].rebuild is None for f in mine):
         return None
@@ -724,10 +732,11 @@ def _refit_with_nominal(jn, judge, nominal, found, current, rejected, held_out) 
     d, sd, worst = compare(new_sc, cur_sc)
     report = {"evidence": " and ".join(ev.name for ev in held), "gain_points": d, "gain_sd_points": sd,
               "adopted": bool(d > TIE_SDS * sd and d > 0 and worst >= -LOSS_SDS)}
-    if not report["adopted"]:
-        return report
-    # an effect the others and the nominal parameters, refitted again without it, fit as well
-    if len(mine) > 1:
+    # an effect the others and the nominal parameters, refitted again without it, fit as well, the
+    # held-out evidence no worse than with the model as the search left it: on a heavy joint a
+    # 0.18 ms clock offset gained 1.36 points at an SD of 0.10 beside a hysteresis fitted on the
+    # nominal model identified on the spot, which the refit of them all fitted within noise
+    if len(mine) > 1 and (report["adopted"] or from_trial):
         best = None
         for i in range(len(mine)):
             rest = [c for k, c in enumerate(comp.parts[1:]) if k != i]
@@ -736,7 +745,9 @@ def _refit_with_nominal(jn, judge, nominal, found, current, rejected, held_out) 
             if alt_sc is None:
                 continue
             da, sda, _ = compare(new_sc, alt_sc)           # what the effect adds over its removal
-            if da <= TIE_SDS * sda and (best is None or da < best[0]):
+            dc, sdc, worst_c = compare(alt_sc, cur_sc)
+            if (da <= TIE_SDS * sda and dc >= -TIE_SDS * sdc and worst_c >= -LOSS_SDS
+                    and (best is None or da < best[0])):
                 best = (da, sda, i, alt, alt_sc)
         if best is not None:
             da, sda, i, alt, alt_sc = best
@@ -748,7 +759,9 @@ def _refit_with_nominal(jn, judge, nominal, found, current, rejected, held_out) 
             found.remove(f)
             mine.pop(i)
             comp, model, new_sc = alt[0], alt[1], alt_sc
-            report["removed"] = f["name"]
+            report.update(removed=f["name"], adopted=True)
+    if not report["adopted"]:
+        return report
     if not on_valid:                                  # the final parameters from the whole trial
         try:
             c1, _, _ = refit(comp, nominal, judge.evidence(jn, "trial"))
@@ -1212,7 +1225,7 @@ def _discover(signals: dict, models: dict, ahead, *, parallel: bool = True, fs_h
     if simulate and judge is not None:
         # the effects refitted with the nominal parameters free (the nominal model may be off)
         for jn in names:
-            r = _refit_with_nominal(jn, judge, nominal[jn], found, current, rejected, held_out)
+            r = _refit_with_nominal(jn, judge, nominal[jn], found, current, rejected, held_out, nominal_from_trial)
             if r is not None:
                 refitted[jn] = r
         if any(r.get("adopted") for r in refitted.values()):
