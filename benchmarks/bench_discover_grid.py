@@ -247,7 +247,7 @@ def run_case(args) -> dict:
         mfile = base / f"{kind}_nominal.toml"
         write_model_file(mfile, [nominal])
         tic = time.perf_counter()
-        outdir = base / f"{kind}_{'spot_' if spot else ''}out"
+        outdir = base / _out_name(kind, spot)
         done = outdir / "discovery.json"
         if reuse and done.exists():                  # a discovery an interrupted run finished
             from mocapfj.io import read_json
@@ -289,6 +289,11 @@ def run_case(args) -> dict:
         out["error"] = f"{type(e).__name__}: {e}"
         out["trace"] = traceback.format_exc()
     return out
+
+
+def _out_name(kind: str, spot: bool) -> str:
+    """A case's discovery directory for `kind` (with the nominal identified on the spot, `spot`)."""
+    return f"{kind}_{'spot_' if spot else ''}out"
 
 
 def _size(kind, case, delay):
@@ -418,8 +423,7 @@ def main(argv=None) -> int:
             jobs.append((c, k, root, float(rng.uniform(0.3, 0.8)), float(rng.choice([-1.0, 1.0])), args.reuse,
                          args.spot))
     if args.only_done:
-        jobs = [j for j in jobs if (root / j[0].name / f"{j[1]}_{'spot_' if args.spot else ''}out"
-                                    / "discovery.json").exists()]
+        jobs = [j for j in jobs if (root / j[0].name / _out_name(j[1], args.spot) / "discovery.json").exists()]
     tic = time.perf_counter()
     # one worker per case's kinds in order: the control bundle is written before the others use it
     with ProcessPoolExecutor(args.jobs) as ex:

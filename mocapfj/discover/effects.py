@@ -75,8 +75,8 @@ def _ls(cols: list[np.ndarray], y: np.ndarray, mask: np.ndarray, nuisance=None) 
     return c[:len(cols)], float(r @ r)
 
 
-def _motor(fam: Families, free: bool) -> np.ndarray | None:
-    """The spring residual's nuisance columns when `free`: the motor's acceleration and velocity, by
+def _motor(fam: Families) -> np.ndarray | None:
+    """The spring residual's nuisance columns: the motor's acceleration and velocity, by
     which an error of the nominal J and b enters it (Families.motor, there when the nominal model
     was identified on the trial itself). A nominal model identified on the spot with a linear
     spring (no model file) takes up a hysteresis in its b and J: on a PA-10 with a 0.22 mrad loop
@@ -86,8 +86,9 @@ def _motor(fam: Families, free: bool) -> np.ndarray | None:
     A nominal model from elsewhere keeps them held: the two columns take some of an effect that
     moves with the motor's velocity (the suite's hysteresis with a friction asymmetry on a
     two-joint arm read as free play), and its errors are the re-identification's to find. A
-    clock offset is never fitted so: its q' dt is b's column. None when not `free`."""
-    return fam.motor if free else None
+    clock offset is never fitted so: its q' dt is b's column. None when the family has none; a
+    candidate fitted with them is `motor_free`."""
+    return fam.motor
 
 
 def _linear_only(fam: Families) -> bool:
@@ -115,8 +116,7 @@ def hysteresis(fam: Families, mask, others) -> Candidate | None:
     if not _linear_only(fam):
         return None
     paths = {}                        # the grid's state paths, the same for both fits: computed once
-    motor = fam.motor is not None
-    fits = (_bouc_wen(fam, mask, False, paths, motor), _bouc_wen(fam, mask, True, paths, motor))
+    fits = (_bouc_wen(fam, mask, False, paths), _bouc_wen(fam, mask, True, paths))
     if any(f is not None for f in fits):
         return with_starts(*fits)
     # Neither regression found a loop: on a light joint the spring residual's rebuilt deflection
@@ -144,7 +144,7 @@ FALLBACK_SHARE = 0.3
 regressions find no loop."""
 
 
-def _bouc_wen(fam: Families, mask, nominal_k: bool, paths: dict, motor: bool = False) -> Candidate | None:
+def _bouc_wen(fam: Families, mask, nominal_k: bool, paths: dict) -> Candidate | None:
     """:func:`hysteresis`'s fit, its total stiffness free or held at the nominal's (`nominal_k`);
     `paths` {(log beta, log gamma): the low-passed state path} of the grid, shared by the two fits.
     Where the deflection's noise is as large as its swing, the regression on the rebuilt deflection
@@ -167,12 +167,12 @@ def _bouc_wen(fam: Families, mask, nominal_k: bool, paths: dict, motor: bool = F
         return [z - d_lp, ones] if nominal_k else [d_lp, z, ones]
 
     def rss(x, keep=False):
-        return _ls(cols(x, keep), y, mask, _motor(fam, motor))[1]
+        return _ls(cols(x, keep), y, mask, _motor(fam))[1]
 
     grid = [np.log([c * f, c * (1 - f)]) for c in np.geomspace(2.0 / span, 200.0 / span, 7) for f in (0.2, 0.5, 0.8)]
     x0 = min(grid, key=lambda x: rss(x, keep=True))
     x = minimize(rss, x0, method="Nelder-Mead", options={"xatol": 0.01, "fatol": 1e-9, "maxfev": 80}).x
-    c, _ = _ls(cols(x), y, mask, _motor(fam, motor))
+    c, _ = _ls(cols(x), y, mask, _motor(fam))
     d_lin, k_h = (-c[0], c[0]) if nominal_k else (c[0], c[1])
     if not k_h > 0:
         return None
@@ -185,7 +185,7 @@ def _bouc_wen(fam: Families, mask, nominal_k: bool, paths: dict, motor: bool = F
     if not 0.0 <= alpha <= 1.0:           # the loop's share of the stiffness beyond the spring's
         return None
     contribution = np.column_stack(cols(x)) @ c
-    return _bouc_wen_candidate(kt, alpha, beta, gamma, narrowest, contribution, motor)
+    return _bouc_wen_candidate(kt, alpha, beta, gamma, narrowest, contribution, fam.motor is not None)
 
 
 def _bouc_wen_candidate(kt: float, alpha: float, beta: float, gamma: float, narrowest: float,
@@ -318,7 +318,7 @@ def stiffness(fam: Families, mask) -> Candidate | None:
         return None
     d_lp = fam.lp(fam.d_hat)
     motor = fam.motor is not None
-    c, _ = _ls([d_lp, np.ones_like(d_lp)], fam.r_s, mask, _motor(fam, motor))
+    c, _ = _ls([d_lp, np.ones_like(d_lp)], fam.r_s, mask, _motor(fam))
     scale = 1.0 + float(c[0]) / fam.k
     contribution = c[0] * d_lp + c[1]
     starts = [stiffness_change(fam.model.spring, 1.0, contribution, motor)]
@@ -349,11 +349,10 @@ def stiffening(fam: Families, mask, others) -> Candidate | None:
     model (hinge grid seed 24000, case 001)."""
     if not _linear_only(fam):
         return None
-    motor = fam.motor is not None
-    return with_starts(_three_slope(fam, mask, motor), _cubic_stiffening(fam, mask, motor))
+    return with_starts(_three_slope(fam, mask), _cubic_stiffening(fam, mask))
 
 
-def _three_slope(fam: Families, mask, motor: bool = False) -> Candidate | None:
+def _three_slope(fam: Families, mask) -> Candidate | None:
     """The three-slope spring (K1, K2, K3 between two breakpoints), breakpoints by variable
     projection on a quantile grid; None when a slope is not positive (the odd spring does not fit
     deflections on one side of zero: a joint held up against gravity works around a few mrad of
@@ -369,14 +368,14 @@ def _three_slope(fam: Families, mask, motor: bool = False) -> Candidate | None:
         d1, d2 = min(x), max(x)
         if d2 - d1 < 1e-7:
             return np.inf
-        return _ls([c for i, c in enumerate(cols(d1, d2)) if i != 3], y, mask, _motor(fam, motor))[1]  # r_s = sum (K_i - k) phi_i
+        return _ls([c for i, c in enumerate(cols(d1, d2)) if i != 3], y, mask, _motor(fam))[1]  # r_s = sum (K_i - k) phi_i
 
     pairs = [(a, b) for ia, a in enumerate(qs) for b in qs[ia + 1:]]
     d1, d2 = min(pairs, key=rss)
     x = minimize(rss, np.array([d1, d2]), method="Nelder-Mead", options={"xatol": 1e-6, "fatol": 1e-9, "maxfev": 60}).x
     d1, d2 = float(min(x)), float(max(x))
     basis = [c for i, c in enumerate(cols(d1, d2)) if i != 3]
-    c, _ = _ls(basis, y, mask, _motor(fam, motor))
+    c, _ = _ls(basis, y, mask, _motor(fam))
     K = k + c[:3]
     if not (np.all(K[1:] > 0) and np.all(K <= MAX_STIFFENING * k)):
         return None
@@ -406,11 +405,11 @@ def _three_slope(fam: Families, mask, motor: bool = False) -> Candidate | None:
                     f"at low torque); a three-slope spring replaces the linear one.")
         el = PiecewiseSpring(k1=float(K[0]), k2=float(K[1]), k3=float(K[2]), tau1=float(tau1), tau2=float(tau2))
         return Candidate("stiffening", "spring", params, 5, contribution, lambda m: m.with_(spring=el), loc, explain,
-                         np.asarray(th, float), np.full(3, 0.1), build, motor_free=motor)
+                         np.asarray(th, float), np.full(3, 0.1), build, motor_free=fam.motor is not None)
     return build(np.log(K / k))
 
 
-def _cubic_stiffening(fam: Families, mask, motor: bool = False) -> Candidate | None:
+def _cubic_stiffening(fam: Families, mask) -> Candidate | None:
     """A cubic spring k1 delta + k3 delta^3 (k3 > 0) about the deflection's own zero. The recorded
     deflection's zero is not known (the joints stage cannot know the link angle's); the linear
     nominal model set it where its spring carries the mean torque. A cubic spring carries it
@@ -422,7 +421,7 @@ def _cubic_stiffening(fam: Families, mask, motor: bool = False) -> Candidate | N
     target = y + fam.lp(k * d)                          # the spring torque, as the residual filters it
 
     def fit(s):
-        return _ls([fam.lp(d + s), fam.lp((d + s) ** 3)], target, mask, _motor(fam, motor))
+        return _ls([fam.lp(d + s), fam.lp((d + s) ** 3)], target, mask, _motor(fam))
 
     def cost(s):                                        # a stiffening spring only (k1, k3 > 0)
         (a, b), r = fit(s)
@@ -463,7 +462,7 @@ def _cubic_stiffening(fam: Families, mask, motor: bool = False) -> Candidate | N
                     f"into contact; a cubic spring replaces the linear one.")
         el = CubicSpring(k1=k1_, k3=k3_)
         return Candidate("stiffening", "spring", params, 2, contribution, lambda m: m.with_(spring=el), loc, explain,
-                         np.asarray(th, float), np.array([0.1, 0.2]), build, motor_free=motor)
+                         np.asarray(th, float), np.array([0.1, 0.2]), build, motor_free=fam.motor is not None)
     return build(np.zeros(2))
 
 
@@ -473,11 +472,10 @@ def backlash(fam: Families, mask, others) -> Candidate | None:
     start whose stiffness is the nominal's (:func:`_dead_zone`)."""
     if not _linear_only(fam):
         return None
-    motor = fam.motor is not None
-    return with_starts(_dead_zone(fam, mask, False, motor), _dead_zone(fam, mask, True, motor))
+    return with_starts(_dead_zone(fam, mask, False), _dead_zone(fam, mask, True))
 
 
-def _dead_zone(fam: Families, mask, nominal_k: bool, motor: bool = False) -> Candidate | None:
+def _dead_zone(fam: Families, mask, nominal_k: bool) -> Candidate | None:
     """:func:`backlash`'s fit, k_b free or held at the nominal k (`nominal_k`). A deflection whose
     noise matches its swing attenuates the free fit's k_b: a light cobot's 0.97 mrad free play, its
     deflection SD 0.65 mrad against 0.93 of noise, gave k_b / k 0.30 at any gap, out of the fit's
@@ -492,9 +490,9 @@ def _dead_zone(fam: Families, mask, nominal_k: bool, motor: bool = False) -> Can
 
     def fit(gap):
         if not nominal_k:
-            return _ls(cols(gap), yk, mask, _motor(fam, motor))
+            return _ls(cols(gap), yk, mask, _motor(fam))
         dz, one = cols(gap)
-        c, r = _ls([one], yk - k * dz, mask, _motor(fam, motor))
+        c, r = _ls([one], yk - k * dz, mask, _motor(fam))
         return np.array([k, c[0]]), r
 
     span = float(np.quantile(np.abs(d[fam.keep_s]), 0.9))
@@ -527,7 +525,7 @@ def _dead_zone(fam: Families, mask, nominal_k: bool, motor: bool = False) -> Can
                     f"coupling. A dead zone in front of the spring (stiffness {k_b:.4g} N m/rad) models it.")
         return Candidate("backlash", "spring", params, 2, contribution,
                          lambda m: m.with_(spring=Backlash(gap, LinearSpring(k_b))), loc, explain,
-                         np.asarray(th, float), np.array([0.5, 0.1]), build, motor_free=motor)
+                         np.asarray(th, float), np.array([0.5, 0.1]), build, motor_free=fam.motor is not None)
     return build(np.array([np.log(gap), np.log(k_b / k)]))
 
 

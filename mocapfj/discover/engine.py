@@ -684,7 +684,7 @@ def _refit_with_nominal(jn, judge, nominal, found, current, rejected, held_out, 
     mine = [f for f in found if f["joint"] == jn]
     if not mine or any(f.get("candidate") is None or f["candidate"].rebuild is None for f in mine):
         return None
-    steps, index = _steps(found, jn)
+    _, index = _steps(found, jn)
     if len(set(index)) != len(mine):              # effects found together (a pair) share a model
         return None
     nom = nominal_parameters(nominal)
@@ -699,7 +699,7 @@ def _refit_with_nominal(jn, judge, nominal, found, current, rejected, held_out, 
         if comp is None:
             return None
         try:
-            c1, f0, f1 = refit(comp, nominal, fit_ev)
+            c1 = refit(comp, nominal, fit_ev)[0]
             return c1, c1.apply()
         except (InputError, RuntimeError, ArithmeticError):
             return None
