@@ -278,7 +278,9 @@ def run_case(args) -> dict:
                 sd_k = without.change_sd(true_t)
                 each[k] = (true_t.fit - without.fit) / sd_k if sd_k > 0 else 0.0
             out["t_sds_each"] = each
+        alias = (r.get("reidentified") or {}).get("j1", {}).get("clock_or_viscous")
         out.update(named=[e["name"] for e in r["effects"]], verdict=r["verdict"],
+                   clock_or_viscous_s=alias["offset_s"] if alias else None,
                    fit_before=r["fit_before"]["j1"], fit_after=r["fit_after"]["j1"],
                    v_before=r["validation"]["fit_before"]["j1"], v_after=r["validation"]["fit_after"]["j1"],
                    v_true=tv["fit"], v_floor=tv["floor"], delay_planted_s=delay,
@@ -381,6 +383,12 @@ def summarize(rows: list[dict]) -> list[str]:
         if zs and kind != "time_delay":
             lines.append(f"  {_PARAM_NAMES[kind]} error / its SD: " + ", ".join(f"{z:+.2f}" for z in zs)
                          + f"; RMS {math.sqrt(np.mean(np.square(zs))):.2f}")
+        alias = [r for r in ok if r.get("clock_or_viscous_s") is not None]
+        if alias:
+            lines.append(f"  a clock offset or the viscous split reported (not named) in {len(alias)}/{len(ok)}"
+                         + (": offset - planted delay (ms) " + ", ".join(
+                             f"{1e3 * (r['clock_or_viscous_s'] - r['delay_planted_s']):+.2f}" for r in alias)
+                            if kind == "time_delay" else ""))
         if kind == "time_delay":
             errs = [1e3 * (r["params"].get("delay_s", float("nan")) - r["delay_planted_s"]) for r in ok
                     if r["named"] and r["named"][0] == "time_delay"]
@@ -439,7 +447,10 @@ def main(argv=None) -> int:
         if "error" in r:
             print(f"{r['case']:20s} {r['family']:8s} {r['kind']:11s} {r['s']:4.2f} ERROR {r['error']}")
             continue
-        print(f"{r['case']:20s} {r['family']:8s} {r['kind']:11s} {r['s']:4.2f} {','.join(r['named']) or 'none':28s} "
+        named = ",".join(r["named"]) or "none"
+        if r.get("clock_or_viscous_s") is not None:
+            named += f" (clock|v {1e3 * r['clock_or_viscous_s']:+.2f}ms)"
+        print(f"{r['case']:20s} {r['family']:8s} {r['kind']:11s} {r['s']:4.2f} {named:28s} "
               f"{r['fit_before']:7.2f} -> {r['fit_after']:6.2f} {r['v_before']:8.2f} -> {r['v_after']:7.2f} "
               f"{r['v_true']:6.2f} {r['v_floor']:6.2f} {r.get('t_gap_sds', 0.0):6.1f} {r['seconds']:5.1f}  "
               + " ".join(f"{k} {v:.3g}" for k, v in r["size"].items()))

@@ -226,7 +226,11 @@ def discover(rec: RecordingLike, *, model=None, validation: RecordingLike | None
         from .ident.joint import identify_signals
 
         gear = {j.name: j.gear_ratio for j in rec.joints}
-        models = {n: identify_signals(s, gear_ratio=gear[n], spring_models=("linear",)).model for n, s in sig.items()}
+        ids = {n: identify_signals(s, gear_ratio=gear[n], spring_models=("linear",)) for n, s in sig.items()}
+        models = {n: r.model for n, r in ids.items()}
+        # what the trial determined in them (discovery reads the viscous split's): NaN, not determined
+        kw.setdefault("nominal_sds", {n: {p: float(x.std) if x.determined else float("nan") for p, x in r.params.items()}
+                                      for n, r in ids.items()})
     else:
         models = joint_models(model, list(sig))
     val = signals(val_rec, validation_calibration) if val_rec is not None else None

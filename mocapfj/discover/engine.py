@@ -115,6 +115,13 @@ class Discovery:
                if r.get("adopted") == "re-identified nominal"]
         if off:
             found = (found + "; " if found else "") + "the nominal parameters re-identified on " + ", ".join(off)
+        split = [f"{j} (a clock offset of {1e3 * a['offset_s']:.2f} ms, or v {a['v']:.3g} and b {a['b']:.3g} N m s/rad "
+                 "where the trial's identification did not split them)"
+                 for j, r in self.reidentified.items() if (a := r.get("clock_or_viscous"))]
+        if split:
+            found = ((found + "; " if found else "") + "the nominal model's viscous split or the clocks are off on "
+                     + ", ".join(split))
+            off = off + split
         if not self.effects and not left:
             return "no missing physics found" + (f"; {found}" if off else "")
         if not left:
@@ -152,6 +159,57 @@ def clock_equivalent(report: dict, delay_named: bool) -> None:
     dt = -(v["value"] - v["nominal"]) / k["nominal"]
     if abs(dt) <= CLOCK_MIN_S:
         report["clock_equivalent"] = {"offset_s": dt, "v_change_pct": v["change_pct"], "v_sds": v["sds"]}
+
+
+CLOCK_SPLIT_SDS = 3.0
+"""A clock offset found against a nominal model identified on the trial stands for the viscous
+split when the split it implies moves the link's viscous friction by at most this many of the
+identification's SDs of it."""
+
+
+def clock_or_viscous(f: dict, sds: dict | None, nominal=None) -> dict | None:
+    """A clock offset `f` (a found ``time_delay``) read as the nominal model's viscous split, or None.
+
+    A mocap angle dt late on the controller's clock reads in the deflection as the link's viscous
+    lag q' dt, and in the torque as the motor's b q_m' lowered by k dt: the model with the offset
+    and the one with v - k dt and b + k dt are the same to first order. A nominal model identified
+    on this trial has the split it was given by the trial, and where the trial determines only
+    b + v (its identification reports v as not determined) an offset found against it may be the
+    split instead: on the heavy control of the hinge grid (seed 32000, case 002, without a model
+    file) a -0.36 ms offset gained 3.1 points on the validation recording, and v = 436, b = 401 N m
+    s/rad in its place fitted both recordings within 0.02 points of it (the truth: v 517, b 320;
+    the identification: v 84 +- 383, b 754, b + v 837 +- 33). So the offset is not named: it is
+    reported as either, when the split is physical (v - k dt and b + k dt not negative) and moves
+    v by at most CLOCK_SPLIT_SDS of the identification's SD of it (`sds`: {parameter: SD}, NaN or
+    absent: not determined; the identification holds b at zero with v its SD of 0.4 N m s/rad when
+    the trial pushes b below zero, and reports v as not determined). k is the spring's before the
+    offset, or the `nominal` model's linear one when an effect replaced the spring (free play)."""
+    from ..dynamics.friction import CoulombViscous
+
+    c = f.get("candidate")
+    before = f.get("before")
+    if c is None or c.name != "time_delay" or before is None or not isinstance(before.friction, CoulombViscous):
+        return None
+    k = getattr(before.spring, "k", None) or getattr(getattr(nominal, "spring", None), "k", None)
+    if not k or not k > 0:
+        return None
+    d = float(c.params["delay_s"])
+    v0, b0 = float(before.friction.v), float(before.b)
+    v1, b1 = v0 - k * d, b0 + k * d
+    sd_v = (sds or {}).get("v")
+    if v1 < 0 or b1 < 0 or (sd_v is not None and np.isfinite(sd_v) and abs(k * d) > CLOCK_SPLIT_SDS * sd_v):
+        return None
+    sd_txt = f"{sd_v:.3g}" if sd_v is not None and np.isfinite(sd_v) else ""
+    return {"offset_s": d, "offset_sd_s": (f["score"].get("parameter_sds") or {}).get("delay_s"),
+            "v": v1, "b": b1, "v_identified": v0, "v_sd_identified": sd_v, "b_identified": b0, "k": float(k),
+            "explanation": (
+                f"The deflection residual follows the link velocity: a clock offset of {1e3 * d:.2f} ms between "
+                f"the mocap and the controller, or the link's viscous friction v = {v1:.4g} N m s/rad with the "
+                f"motor's b = {b1:.4g} N m s/rad (the model before it: v = {v0:.4g}, b = {b0:.4g}; the trial's "
+                f"identification gave v an SD of {sd_txt or 'none: not determined'}), "
+                f"which are one model to first order (a mocap angle dt late reads as the viscous lag v q' / k). "
+                f"The trial does not tell them apart; a model file with v, or markers.clock_offset_s from a "
+                f"hardware sync, does.")}
 
 
 def _ties(effect: dict) -> str:
@@ -931,7 +989,8 @@ def _reidentification(jn, s, nominal, current, found, rejected, held_out, on_val
 def discover(signals: dict, models: dict, *, fs_hz: float, validation: dict | None = None, holdout: float = 0.3,
              alpha: float = 1e-10, screen: float = SCREEN, min_explained: float = 0.003, max_effects: int = 3,
              effects=EFFECTS, simulate: bool = True, reidentify: bool = True,
-             parallel: bool = True, ahead=None, nominal_from_trial: bool = False) -> Discovery:
+             parallel: bool = True, ahead=None, nominal_from_trial: bool = False,
+             nominal_sds: dict | None = None) -> Discovery:
     """Discover what `models` miss in the recording `signals` (joint -> JointSignals).
 
     alpha : significance after the Bonferroni correction over the effects and joints tried.
@@ -954,7 +1013,11 @@ def discover(signals: dict, models: dict, *, fs_hz: float, validation: dict | No
         signals, models, validation joints and holdout), e.g. while the validation recording's
         joints were solved; discover() stops its worker when it ends. Default: started here.
     nominal_from_trial : the models were identified on this trial (a linear spring, no model
-        file): the spring effects are fitted with the motor's J and b free (:func:`.effects._motor`).
+        file): the spring effects are fitted with the motor's J and b free (:func:`.effects._motor`),
+        and a clock offset the link's viscous friction could stand for is reported as either
+        (:func:`clock_or_viscous`), not named.
+    nominal_sds : {joint: {parameter: SD}} of the models identified on this trial (their ``v``
+        tells whether the trial determined the viscous split; default: it did not).
     """
     unknown = [e for e in effects if e not in FITTERS]
     if unknown:
@@ -975,7 +1038,7 @@ def discover(signals: dict, models: dict, *, fs_hz: float, validation: dict | No
             return _discover(signals, models, ahead, parallel=parallel, fs_hz=fs_hz, validation=validation, holdout=holdout,
                              alpha=alpha, screen=screen, min_explained=min_explained, max_effects=max_effects,
                              effects=effects, simulate=simulate, reidentify=reidentify,
-                             nominal_from_trial=nominal_from_trial)
+                             nominal_from_trial=nominal_from_trial, nominal_sds=nominal_sds)
     finally:
         if ahead is not None:
             ahead.close()
@@ -1027,7 +1090,8 @@ def reidentification_ahead(signals: dict, models: dict, validation=None, holdout
 
 def _discover(signals: dict, models: dict, ahead, *, parallel: bool = True, fs_hz: float, validation: dict | None, holdout: float,
               alpha: float, screen: float, min_explained: float, max_effects: int, effects, simulate: bool,
-              reidentify: bool, search_joints=None, nominal_from_trial: bool = False) -> Discovery:
+              reidentify: bool, search_joints=None, nominal_from_trial: bool = False,
+              nominal_sds: dict | None = None) -> Discovery:
     """discover()'s work, with the re-identifications from `ahead` (None: none are made);
     `search_joints`: the joints the search looks at (default all; :func:`_search_again`)."""
     nominal = {n: models[n] for n in signals}
@@ -1074,6 +1138,7 @@ def _discover(signals: dict, models: dict, ahead, *, parallel: bool = True, fs_h
         # the second search's model was re-identified on the whole trial when a validation
         # recording holds the evidence out: the trial's last part is then not held out
         judge.tail_held_out = search_joints is None
+        judge.nominal_free = nominal_from_trial
     stop = f"{max_effects} effects found (the most searched for)"
     for _ in range(max_effects + len(effects)):
         if len(found) >= max_effects:
@@ -1109,6 +1174,9 @@ def _discover(signals: dict, models: dict, ahead, *, parallel: bool = True, fs_h
                 break
             judged = [judge.judge(jn, c, sc, current[jn], n_tests, prior=_prior(found, jn)) for jn, c, sc in cands]
             judged += _stiffness_judged(judge, judged, fams, current, holdout, n_tests, found)
+            # the nominal model identified on this trial: the leaders judged with its parameters free
+            # when none is admitted with them held
+            judged = judge.with_nominal(judged, current, n_tests)
             for j in judged:
                 if not j.admissible:
                     key = (j.joint, j.candidate.name)
@@ -1153,7 +1221,18 @@ def _discover(signals: dict, models: dict, ahead, *, parallel: bool = True, fs_h
                      "candidates": [{"name": j.candidate.name, "joint": j.joint, "held_out_gain_points": j.gain,
                                      "held_out_gain_sd_points": j.sd, "admissible": j.admissible} for j in judged]}
             before = current[jn]
-            if restore is None:
+            if win.with_nominal is not None:
+                # admitted refitted with the nominal parameters (Judge.judge_with_nominal): its SDs
+                # from that refit, the nominal parameters' share of the trial's information counted
+                parts = split_parts(*judge.parameter_sds(jn, win.with_nominal, before), 2)
+                _with_sds(score, *parts[1])
+                p0 = nominal_parameters(before).params
+                p1 = win.with_nominal.parts[0].params
+                score["nominal_refitted"] = {k: {"nominal": p0[k], "value": p1[k], "std": parts[0][0].get(k),
+                                                 "change_pct": 100.0 * (p1[k] - p0[k]) / p0[k] if p0[k] else None}
+                                             for k in p0}
+                score["held_out_with_nominal_held"] = win.reason_held
+            elif restore is None:
                 _with_sds(score, *judge.parameter_sds(jn, cand, before))
             else:
                 prev = restore["entry"]
@@ -1245,6 +1324,12 @@ def _discover(signals: dict, models: dict, ahead, *, parallel: bool = True, fs_h
         fams, qdd = _families_all(current, signals, fs_hz, ctx, nominal_from_trial)
     for jn, r in refitted.items():
         reidentified.setdefault(jn, {})["refitted_with_effects"] = r
+    if nominal_from_trial:
+        # a clock offset the nominal model's viscous split could stand for: reported as either
+        for f in found:
+            alias = clock_or_viscous(f, (nominal_sds or {}).get(f["joint"]), nominal[f["joint"]])
+            if alias is not None:
+                f["clock_or_viscous"] = alias
     effects_out, fit_before, fit_after, fits, residuals = [], {}, {}, {}, {}
     val = None
     if simulate:
@@ -1276,10 +1361,19 @@ def _discover(signals: dict, models: dict, ahead, *, parallel: bool = True, fs_h
                     before, after, step_gain = _prove(nominal[jn], steps, validation[jn],
                                                       {k: x for k, x in vq.items() if k != jn})
                 val["effects"] += [{"name": f["name"], "joint": jn, "fit_gain_pct": step_gain[i]}
-                                   for f, i in zip(mine, index)]
+                                   for f, i in zip(mine, index) if "clock_or_viscous" not in f]
+                for f, i in zip(mine, index):
+                    if "clock_or_viscous" in f:
+                        f["clock_or_viscous"]["validation_fit_gain_pct"] = step_gain[i]
                 val["fit_before"][jn], val["fit_after"][jn], val["fits"][jn] = before.fit, after.fit, _fits(before, after)
     for f in found:
         c = f.get("candidate")
+        if "clock_or_viscous" in f:                     # not named: either of two (clock_or_viscous)
+            reidentified.setdefault(f["joint"], {})["clock_or_viscous"] = {
+                **f["clock_or_viscous"], "fit_gain_pct": f.get("fit_gain_pct"),
+                "held_out_gain_points": f["score"].get("held_out_gain_points"),
+                "held_out_gain_sd_points": f["score"].get("held_out_gain_sd_points")}
+            continue
         if c is None:                                   # found by the re-identification
             effects_out.append({"name": f["name"], "joint": f["joint"], "explanation": f["explanation"],
                                 "location": {"residual": "output error", "found_by": "re-identification",
@@ -1293,10 +1387,12 @@ def _discover(signals: dict, models: dict, ahead, *, parallel: bool = True, fs_h
                                          "explained_torque_rms_Nm": f["score"]["explained_Nm"],
                                          **{k: f["score"][k] for k in ("held_out_gain_points", "held_out_gain_sd_points",
                                                                        "held_out", "whole_evidence_z", "candidates",
-                                                                       "indistinguishable_from", "revisited", "refitted_with")
+                                                                       "indistinguishable_from", "revisited", "refitted_with",
+                                                                       "held_out_with_nominal_held")
                                             if k in f["score"]}},
                             "parameters": c.params,
-                            **{k: f["score"][k] for k in ("parameter_sds", "not_determined") if k in f["score"]},
+                            **{k: f["score"][k] for k in ("parameter_sds", "not_determined", "nominal_refitted")
+                               if k in f["score"]},
                             "p_value": f["p_value"], "fit_gain_pct": f.get("fit_gain_pct"), "runner_up": f["runner_up"],
                             **({"confirmed_by_reidentification": f["confirmed"]} if "confirmed" in f else {})})
     remaining = {jn: _remaining(fams[jn], signals[jn]) for jn in names}
@@ -1321,7 +1417,7 @@ def _discover(signals: dict, models: dict, ahead, *, parallel: bool = True, fs_h
     return _search_again(d, adopted, signals, parallel=parallel, fs_hz=fs_hz, validation=validation, holdout=holdout,
                          alpha=alpha, screen=screen, min_explained=min_explained,
                          max_effects=max_effects - len(effects_out), effects=effects,
-                         nominal_from_trial=nominal_from_trial)
+                         nominal_from_trial=nominal_from_trial, nominal_sds=nominal_sds)
 
 
 def _search_again(d: Discovery, joints: list, signals: dict, **kw) -> Discovery:
@@ -1354,6 +1450,8 @@ def _search_again(d: Discovery, joints: list, signals: dict, **kw) -> Discovery:
         residuals[jn] = {**d.residuals[jn], **{k: v for k, v in d2.residuals[jn].items() if k.endswith("_after")}}
         remaining[jn] = d2.remaining[jn]
         reidentified[jn]["searched_again"] = [e["name"] for e in new if e["joint"] == jn]
+        if "clock_or_viscous" in d2.reidentified.get(jn, {}):
+            reidentified[jn]["clock_or_viscous"] = d2.reidentified[jn]["clock_or_viscous"]
         if val is not None and d2.validation is not None and jn in d2.validation["fit_after"]:
             val["fit_after"][jn] = d2.validation["fit_after"][jn]
             val["fits"][jn] = {"before": d.validation["fits"][jn]["before"], "after": d2.validation["fits"][jn]["after"]}
