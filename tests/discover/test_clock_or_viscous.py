@@ -53,3 +53,23 @@ def test_the_split_is_reported_only_where_the_trial_did_not_determine_it(pa10_hi
     other = _found(model, d)
     other["candidate"] = SimpleNamespace(name="hysteresis", params={"alpha": 0.7})
     assert engine.clock_or_viscous(other, None) is None
+
+
+def test_an_offset_named_against_an_undetermined_split_is_given_the_range_the_split_allows(pa10_hinge):
+    """Named (its split would make b negative), an offset d against a model whose v the trial did
+    not determine is known only within d - v / k to d + b / k, where each offset has a physical
+    split that fits alike: reported as not determined there, with that range's SD as a uniform's.
+    With v determined at SD s_v, its SD takes s_v / k."""
+    _, _, model = pa10_hinge
+    k, v, b = model.spring.k, model.friction.v, model.b
+    d = -1.5 * b / k                                                   # b + k d < 0: named
+    f = _found(model, d)
+    assert engine.clock_or_viscous(f, None) is None
+    engine.offset_with_split(f, None, model)
+    lo, hi = d - v / k, d + b / k
+    assert np.isclose(f["score"]["parameter_sds"]["delay_s"], np.hypot(1e-5, (hi - lo) / np.sqrt(12.0)))
+    assert "between" in f["score"]["not_determined"]["delay_s"]
+    g = _found(model, d)
+    engine.offset_with_split(g, {"v": 0.1 * v}, model)
+    assert np.isclose(g["score"]["parameter_sds"]["delay_s"], np.hypot(1e-5, 0.1 * v / k))
+    assert "not_determined" not in g["score"]
