@@ -161,6 +161,21 @@ def clock_equivalent(report: dict, delay_named: bool) -> None:
         report["clock_equivalent"] = {"offset_s": dt, "v_change_pct": v["change_pct"], "v_sds": v["sds"]}
 
 
+def _offset_split(f: dict, nominal=None):
+    """(offset d, k, v, b) of a found ``time_delay`` `f` and the model before it, whose friction is
+    Coulomb-viscous; k the spring's, or the `nominal` model's linear one when an effect replaced
+    the spring (free play); None otherwise."""
+    from ..dynamics.friction import CoulombViscous
+
+    c, before = f.get("candidate"), f.get("before")
+    if c is None or c.name != "time_delay" or before is None or not isinstance(before.friction, CoulombViscous):
+        return None
+    k = getattr(before.spring, "k", None) or getattr(getattr(nominal, "spring", None), "k", None)
+    if not k or not k > 0:
+        return None
+    return float(c.params["delay_s"]), float(k), float(before.friction.v), float(before.b)
+
+
 CLOCK_SPLIT_SDS = 3.0
 """A clock offset found against a nominal model identified on the trial stands for the viscous
 split when the split it implies moves the link's viscous friction by at most this many of the
@@ -182,19 +197,12 @@ def clock_or_viscous(f: dict, sds: dict | None, nominal=None) -> dict | None:
     reported as either, when the split is physical (v - k dt and b + k dt not negative) and moves
     v by at most CLOCK_SPLIT_SDS of the identification's SD of it (`sds`: {parameter: SD}, NaN or
     absent: not determined; the identification holds b at zero with v its SD of 0.4 N m s/rad when
-    the trial pushes b below zero, and reports v as not determined). k is the spring's before the
-    offset, or the `nominal` model's linear one when an effect replaced the spring (free play)."""
-    from ..dynamics.friction import CoulombViscous
-
-    c = f.get("candidate")
-    before = f.get("before")
-    if c is None or c.name != "time_delay" or before is None or not isinstance(before.friction, CoulombViscous):
+    the trial pushes b below zero, and reports v as not determined); k as :func:`_offset_split`
+    takes it."""
+    got = _offset_split(f, nominal)
+    if got is None:
         return None
-    k = getattr(before.spring, "k", None) or getattr(getattr(nominal, "spring", None), "k", None)
-    if not k or not k > 0:
-        return None
-    d = float(c.params["delay_s"])
-    v0, b0 = float(before.friction.v), float(before.b)
+    d, k, v0, b0 = got
     v1, b1 = v0 - k * d, b0 + k * d
     sd_v = (sds or {}).get("v")
     if v1 < 0 or b1 < 0 or (sd_v is not None and np.isfinite(sd_v) and abs(k * d) > CLOCK_SPLIT_SDS * sd_v):
@@ -223,16 +231,10 @@ def offset_with_split(f: dict, sds: dict | None, nominal=None) -> None:
     / sqrt 12). On the heavy joint of the grid (seed 32000, case 001, -0.45 ms planted, no model
     file) the identification held b at zero and took v = 744 for 446 N m s/rad: the offset named,
     -0.25 ms, had an SD of 0.006 ms from the noise; the range is -0.80 to -0.25 ms."""
-    from ..dynamics.friction import CoulombViscous
-
-    c, before = f.get("candidate"), f.get("before")
-    if c is None or c.name != "time_delay" or before is None or not isinstance(before.friction, CoulombViscous):
+    got = _offset_split(f, nominal)
+    if got is None:
         return
-    k = getattr(before.spring, "k", None) or getattr(getattr(nominal, "spring", None), "k", None)
-    if not k or not k > 0:
-        return
-    d = float(c.params["delay_s"])
-    v0, b0 = float(before.friction.v), float(before.b)
+    d, k, v0, b0 = got
     sd_v = (sds or {}).get("v")
     score = f["score"]
     sds_out = score.setdefault("parameter_sds", {})
