@@ -26,7 +26,7 @@ from ..errors import InputError
 from ..ident.conditioning import noise_gain
 from .compare import in_band
 from ..dynamics import LinearSpring
-from .effects import FITTERS, OWN_STIFFNESS, Candidate, stiffness_change
+from .effects import FITTERS, OWN_STIFFNESS, Candidate, nominal_parameters, stiffness_change
 from .evidence import Evidence
 from .refit import refit
 from .reident import segment
@@ -54,8 +54,8 @@ REVISIT_SHARE = 0.5
 """A candidate of the first step that gained at least this share of the chosen one's held-out gain
 is decided again once a second effect is modelled (:meth:`Judge.revisit`)."""
 NOMINAL_TRIES = 2
-"""Candidates of a step judged again with the nominal parameters free when none is admitted with
-them held (:meth:`Judge.with_nominal`)."""
+"""Candidates of a step not admitted with the nominal parameters held, ranked above every admitted
+one, that are judged again with them free (:meth:`Judge.with_nominal`)."""
 TIE_SDS = 2.0
 """Two candidates tie when the leader's held-out fit exceeds the other's by no more than this many
 noise SDs of their difference."""
@@ -337,8 +337,6 @@ class Judge:
         jn, c = j.joint, j.candidate
         if not self.nominal_free or j.model is None or c.rebuild is None:
             return j
-        from .effects import nominal_parameters
-
         nom = nominal_parameters(current)
         if nom is None:
             return j
