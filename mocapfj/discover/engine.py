@@ -878,11 +878,17 @@ def _refit_with_nominal(jn, judge, nominal, found, current, rejected, held_out, 
         ch[:] = [ch[0]] + [simulate_joint(f["model"], data.t, data.q, data.q_m, data.u, others, band_hz=ch[0].band_hz)
                            for f in mine]
     # the parameters the refitted model uses (an effect's friction or spring replaces c, v or k)
-    p0, p1 = nom.params, comp.parts[0].params
-    report["parameters"] = {k: {"nominal": p0[k], "value": p1[k], "std": sds[0][0][k],
-                                "change_pct": 100.0 * (p1[k] - p0[k]) / p0[k] if p0[k] else None}
-                            for k in p0 if k in sds[0][0]}
+    report["parameters"] = _nominal_changes(nom.params, comp.parts[0].params, sds[0][0], used_only=True)
     return report
+
+
+def _nominal_changes(p0: dict, p1: dict, std: dict, used_only: bool = False) -> dict:
+    """{parameter: {nominal, value, std, change_pct}} of the nominal parameters refitted (p0 -> p1,
+    `std` their SDs); `used_only`: only those with an SD (the others an effect's friction or
+    spring replaced)."""
+    return {k: {"nominal": p0[k], "value": p1[k], "std": std.get(k),
+                "change_pct": 100.0 * (p1[k] - p0[k]) / p0[k] if p0[k] else None}
+            for k in p0 if not used_only or k in std}
 
 
 def _reidentification(jn, s, nominal, current, found, rejected, held_out, on_valid, holdout, others_trial,
@@ -1212,8 +1218,8 @@ def _discover(signals: dict, models: dict, ahead, *, parallel: bool = True, fs_h
                 break
             judged = [judge.judge(jn, c, sc, current[jn], n_tests, prior=_prior(found, jn)) for jn, c, sc in cands]
             judged += _stiffness_judged(judge, judged, fams, current, holdout, n_tests, found)
-            # the nominal model identified on this trial: the leaders judged with its parameters free
-            # when none is admitted with them held
+            # the nominal model identified on this trial: the leaders not admitted with its parameters
+            # held, ranked above every admitted one, judged with them free
             judged = judge.with_nominal(judged, current, n_tests)
             for j in judged:
                 if not j.admissible:
@@ -1264,11 +1270,8 @@ def _discover(signals: dict, models: dict, ahead, *, parallel: bool = True, fs_h
                 # from that refit, the nominal parameters' share of the trial's information counted
                 parts = split_parts(*judge.parameter_sds(jn, win.with_nominal, before), 2)
                 _with_sds(score, *parts[1])
-                p0 = nominal_parameters(before).params
-                p1 = win.with_nominal.parts[0].params
-                score["nominal_refitted"] = {k: {"nominal": p0[k], "value": p1[k], "std": parts[0][0].get(k),
-                                                 "change_pct": 100.0 * (p1[k] - p0[k]) / p0[k] if p0[k] else None}
-                                             for k in p0}
+                score["nominal_refitted"] = _nominal_changes(nominal_parameters(before).params,
+                                                             win.with_nominal.parts[0].params, parts[0][0])
                 score["held_out_with_nominal_held"] = win.reason_held
             elif restore is None:
                 _with_sds(score, *judge.parameter_sds(jn, cand, before))
@@ -1365,11 +1368,12 @@ def _discover(signals: dict, models: dict, ahead, *, parallel: bool = True, fs_h
     if nominal_from_trial:
         # a clock offset the nominal model's viscous split could stand for: reported as either
         for f in found:
-            alias = clock_or_viscous(f, (nominal_sds or {}).get(f["joint"]), nominal[f["joint"]])
+            sds, nom = (nominal_sds or {}).get(f["joint"]), nominal[f["joint"]]
+            alias = clock_or_viscous(f, sds, nom)
             if alias is not None:
                 f["clock_or_viscous"] = alias
             else:
-                offset_with_split(f, (nominal_sds or {}).get(f["joint"]), nominal[f["joint"]])
+                offset_with_split(f, sds, nom)
     effects_out, fit_before, fit_after, fits, residuals = [], {}, {}, {}, {}
     val = None
     if simulate:
@@ -1400,11 +1404,11 @@ def _discover(signals: dict, models: dict, ahead, *, parallel: bool = True, fs_h
                 else:
                     before, after, step_gain = _prove(nominal[jn], steps, validation[jn],
                                                       {k: x for k, x in vq.items() if k != jn})
-                val["effects"] += [{"name": f["name"], "joint": jn, "fit_gain_pct": step_gain[i]}
-                                   for f, i in zip(mine, index) if "clock_or_viscous" not in f]
                 for f, i in zip(mine, index):
-                    if "clock_or_viscous" in f:
+                    if "clock_or_viscous" in f:             # not named: its gain goes with the report
                         f["clock_or_viscous"]["validation_fit_gain_pct"] = step_gain[i]
+                    else:
+                        val["effects"].append({"name": f["name"], "joint": jn, "fit_gain_pct": step_gain[i]})
                 val["fit_before"][jn], val["fit_after"][jn], val["fits"][jn] = before.fit, after.fit, _fits(before, after)
     for f in found:
         c = f.get("candidate")
