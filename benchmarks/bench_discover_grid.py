@@ -50,6 +50,9 @@ Per kind it prints:
   of that change; above VISIBLE_SDS = 3). A validation recording can excite an effect its trial
   does not (free play on a gravity-loaded heavy joint whose trial torque never reverses): such a
   case cannot be found from its trial;
+- with ``--spot``, the same against the model identified on the spot (written by discovery as
+  nominal.toml; column ``t_spot`` in the summary): an effect that model takes up on the trial
+  (more Coulomb and less viscous friction for a breakaway at 0.09 rad/s) is not there to find;
 - the gain on the validation recording against the gap between the nominal and the true model;
 - the error of a delay, and that error over the SD discovery reports for it; the same for the
   main parameters of a transmission error, a Stribeck friction, a free play, a hysteresis and a
@@ -268,6 +271,14 @@ def run_case(args) -> dict:
         true_t = simulate_joint(true, st.t, st.q, st.q_m, st.u, band_hz=band_t)
         sd_t = nom_t.change_sd(true_t)
         out.update(t_gap=true_t.fit - nom_t.fit, t_gap_sds=(true_t.fit - nom_t.fit) / sd_t if sd_t > 0 else 0.0)
+        if spot and (outdir / "nominal.toml").exists():
+            # how far the trial shows the effect beyond what the model identified on the spot took
+            # of it: the true model against that model (a Stribeck friction at 0.09 rad/s on a
+            # heavy joint is mostly more Coulomb and less viscous friction to a linear model)
+            spot_m = mocapfj.api.joint_models(str(outdir / "nominal.toml"), ["j1"])["j1"]
+            spot_t = simulate_joint(spot_m, st.t, st.q, st.q_m, st.u, band_hz=band_t)
+            sd_s = spot_t.change_sd(true_t)
+            out["t_spot_sds"] = (true_t.fit - spot_t.fit) / sd_s if sd_s > 0 else 0.0
         if kind == "two_effects":
             # how far the trial shows each effect: the true model against the true model without it
             stats = _with_mean(t_base["stats"], base / "control_ident")
@@ -369,6 +380,12 @@ def summarize(rows: list[dict]) -> list[str]:
             vis = [f == want for f, r in zip(first, ok) if r.get("t_gap_sds", 0.0) > VISIBLE_SDS]
             lines.append(f"  on the cases whose trial shows the effect (true model > {VISIBLE_SDS:g} noise SDs above the "
                          f"nominal on the trial): {sum(vis)}/{len(vis)}")
+            spot = [(f == want, r["t_spot_sds"]) for f, r in zip(first, ok) if "t_spot_sds" in r]
+            if spot:
+                vis = [h for h, t in spot if t > VISIBLE_SDS]
+                lines.append(f"  on the cases whose trial shows it beyond the model identified on the spot (true model > "
+                             f"{VISIBLE_SDS:g} noise SDs above that model on the trial): {sum(vis)}/{len(vis)}; per case "
+                             + ", ".join(f"{t:.1f}" for _, t in spot))
         if kind != "control":
             rec = []
             for r in ok:

@@ -18,7 +18,8 @@ def run_discover(recording, out: str | Path, model: str | Path | None = None, va
     The model: a model file (or a scenario file, read without its effects), else each joint
     identified on the spot (linear spring). Writes OUT/joints (and OUT/validation_joints),
     OUT/discovery.json, the augmented model OUT/model.toml and the before/after residuals
-    OUT/residuals.csv (t, and per joint r_delta_before/after rad, r_u_before/after N m).
+    OUT/residuals.csv (t, and per joint r_delta_before/after rad, r_u_before/after N m); without
+    a model file, the model identified on the spot as OUT/nominal.toml.
     """
     from threadpoolctl import threadpool_limits
 
@@ -66,8 +67,9 @@ def _run_discover(recording, out, model, validation) -> dict:
 
 def write_discovery(d, out: str | Path) -> dict:
     """Write a :class:`mocapfj.discover.Discovery` into OUT: discovery.json (its ``to_dict()``),
-    the augmented model model.toml and the before/after residuals residuals.csv; returns the
-    summary."""
+    the augmented model model.toml, the before/after residuals residuals.csv and, when the nominal
+    model was identified on the spot (no model file), that model as nominal.toml (what the effects
+    were searched against); returns the summary."""
     from ..discover import write_model_file
     from ..io import write_csv_columns
 
@@ -76,6 +78,8 @@ def write_discovery(d, out: str | Path) -> dict:
     write_json(out / "discovery.json", summary)
     write_model_file(out / "model.toml", d.models.values(),
                      [{k: e[k] for k in ("name", "joint", "parameters", "p_value")} for e in d.effects])
+    if d.model_source == "identified":
+        write_model_file(out / "nominal.toml", d.nominal.values())
     cols = {}
     for name, r in d.residuals.items():
         cols.setdefault("t", r["t"])
