@@ -1466,7 +1466,7 @@ def _discover(signals: dict, models: dict, ahead, *, parallel: bool = True, fs_h
                                                                        "held_out_with_nominal_held")
                                             if k in f["score"]}},
                             "parameters": c.params,
-                            **{k: f["score"][k] for k in ("parameter_sds", "not_determined", "nominal_refitted")
+                            **{k: f["score"][k] for k in ("parameter_sds", "not_determined", "nominal_refitted", "sds_with_nominal_free")
                                if k in f["score"]},
                             "p_value": f["p_value"], "fit_gain_pct": f.get("fit_gain_pct"), "runner_up": f["runner_up"],
                             **({"confirmed_by_reidentification": f["confirmed"]} if "confirmed" in f else {})})
