@@ -1255,14 +1255,6 @@ def _discover(signals: dict, models: dict, ahead, *, parallel: bool = True, fs_h
             win, ties = judge.choose(judged)
             if win is None:
                 stop = "no further effect is significant"
-                if len(results) > len(cands) and _below_floor_any(current, signals, qdd, names):
-                    # a mismatch the simulation shows and the equation error's leaders do not
-                    # explain: the next candidates of its ranking are judged (the ones judged are
-                    # banned). A breakaway friction at 0.008 rad/s under a tanh law of 0.012 rad/s
-                    # is hardly in the equation error, yet its trial sits 6.9 noise SDs below
-                    # the true model's fit and 3.4 points below the torque's floor (hinge grid
-                    # seed 33000, case 002)
-                    continue
                 break
             jn = win.joint
             if not np.isfinite(win.z_whole):                 # reported for every effect named
