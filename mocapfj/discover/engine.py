@@ -227,8 +227,8 @@ def offset_with_split(f: dict, sds: dict | None, nominal=None) -> None:
     (:func:`clock_or_viscous`), so the trial's uncertainty of v is the offset's too. With v
     determined at SD s_v, the offset's SD takes s_v / k beside the noise's; with v not determined,
     every d' that keeps v and b physical, d - v / k to d + b / k, fits alike: the offset is
-    reported as not determined within that range, with the range's SD as a uniform's (its width
-    / sqrt 12). On the heavy joint of the grid (seed 32000, case 001, -0.45 ms planted, no model
+    reported as not determined within that range, with the RMS error of d for an offset uniform
+    over it (sqrt(width^2 / 12 + (d - middle)^2)). On the heavy joint of the grid (seed 32000, case 001, -0.45 ms planted, no model
     file) the identification held b at zero and took v = 744 for 446 N m s/rad: the offset named,
     -0.25 ms, had an SD of 0.006 ms from the noise; the range is -0.80 to -0.25 ms."""
     got = _offset_split(f, nominal)
@@ -243,7 +243,13 @@ def offset_with_split(f: dict, sds: dict | None, nominal=None) -> None:
         sds_out["delay_s"] = float(np.hypot(sd_d, sd_v / k))
         return
     lo, hi = d - v0 / k, d + b0 / k
-    sds_out["delay_s"] = float(np.hypot(sd_d, (hi - lo) / np.sqrt(12.0)))
+    # the RMS error of d when the clock's offset is anywhere in the range: the range's SD as a
+    # uniform's about its middle, and d's distance from that middle. The fit leaves d at an end
+    # of it where the spot model's b is at its bound, 0 (fresh seed 34000, two light cobots
+    # without a model file: planted -0.20 and -0.30 ms, named -0.04 and -0.06 at the range's
+    # upper end, inside ranges of 0.27 and 0.35 ms; 2.1 and 2.3 of the SDs about the middle,
+    # 1.0 and 1.2 of these)
+    sds_out["delay_s"] = float(np.hypot(sd_d, np.hypot((hi - lo) / np.sqrt(12.0), d - 0.5 * (lo + hi))))
     score["not_determined"] = {**score.get("not_determined", {}), "delay_s": (
         f"between {1e3 * lo:.3g} and {1e3 * hi:.3g} ms: the trial's identification did not split the link's "
         f"viscous friction from the motor's (v = {v0:.4g}, b = {b0:.4g} N m s/rad before it), and any offset d' "
