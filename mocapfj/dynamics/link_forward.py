@@ -10,7 +10,9 @@ Verlet with the friction law set-valued, module docstring of :mod:`.link_respons
 
 - friction: Coulomb and viscous coefficients per direction of motion plus a Stribeck excess
   s exp(-(|q'|/vs)^x) per direction (:class:`.CoulombViscous`, :class:`.AsymmetricCoulombViscous`,
-  :class:`.Stribeck`, :class:`.AsymmetricStribeck`). Under the sign law the link sticks while the
+  :class:`.Stribeck`, :class:`.AsymmetricStribeck`), and a Coulomb level that ripples with the link
+  angle, sum a_k cos(n_k q + phi_k) on both directions (:class:`.PositionDependent` over one of
+  those, the ripple taken at each substep's mid angle). Under the sign law the link sticks while the
   net torque is below the breakaway level c + s of the direction it would move in; while it
   slides, the Stribeck excess is taken at the substep's starting speed (first order in it, exact
   in the rest);
@@ -33,12 +35,12 @@ import numpy as np
 
 from ..errors import InputError
 from .drivetrain import TransmissionError
-from .friction import AsymmetricCoulombViscous, AsymmetricStribeck, CoulombViscous, Stribeck
+from .friction import AsymmetricCoulombViscous, AsymmetricStribeck, CoulombViscous, PositionDependent, Stribeck
 from .hysteresis import BoucWen
 from .link_response import context_arrays, substeps
 from .springs import Backlash, CubicSpring, LinearSpring, PiecewiseSpring
 
-__all__ = ["link_forward", "encode_friction", "encode_spring"]
+__all__ = ["link_forward", "encode_friction", "encode_ripple", "encode_spring"]
 
 _KERNEL = None
 SPRING_POLY, SPRING_PIECEWISE, SPRING_BOUC_WEN = 0, 1, 2
@@ -46,7 +48,13 @@ SPRING_POLY, SPRING_PIECEWISE, SPRING_BOUC_WEN = 0, 1, 2
 
 def encode_friction(fr) -> np.ndarray | None:
     """(10,) c_pos, c_neg, v_pos, v_neg, s_pos, s_neg, vs_pos, vs_neg, exponent, eps of a friction
-    law the kernel runs, or None."""
+    law the kernel runs, or None. A :class:`.PositionDependent` law is its base's, the ripple
+    apart (:func:`encode_ripple`), when the ripple never takes either Coulomb level below zero."""
+    if type(fr) is PositionDependent:
+        a = encode_friction(fr.base)
+        if a is None or float(np.abs(fr.amplitudes).sum()) > min(a[0], a[1]):
+            return None
+        return a
     eps = float(getattr(fr, "smoothing", 0.0) or 0.0)
     t = type(fr)
     if t is CoulombViscous:
@@ -65,6 +73,14 @@ def encode_friction(fr) -> np.ndarray | None:
             and (a[:2] + a[4:6] >= 0).all()):
         return None
     return a
+
+
+def encode_ripple(fr) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(orders, amplitudes, phases) of a :class:`.PositionDependent` law's ripple, each (K,);
+    empty for any other law."""
+    if type(fr) is PositionDependent:
+        return tuple(np.asarray(getattr(fr, n), dtype=np.float64) for n in ("orders", "amplitudes", "phases"))
+    return np.zeros(0), np.zeros(0), np.zeros(0)
 
 
 def encode_spring(sp) -> tuple[int, np.ndarray, float] | None:
@@ -153,8 +169,15 @@ def _te_value_py(qm, N, amps, phases, orders):  # pragma: no cover - compiled
         s += amps[j] * math.sin(orders[j] * N * qm + phases[j])
     return s
 
+def _ripple_py(q, r_orders, r_amps, r_phases):  # pragma: no cover - compiled
+    s = 0.0
+    for j in range(r_amps.shape[0]):
+        s += r_amps[j] * math.cos(r_orders[j] * q + r_phases[j])
+    return s
+
+
 def _run_py(q_m, qd_m, dt, n_sub, I, mglx, mgly, fr, kind, P, gap, N, amps, phases, orders, q0, w0,
-            ctx, cI, cgx, cgy, cex):  # pragma: no cover
+            ctx, cI, cgx, cgy, cex, r_orders, r_amps, r_phases):  # pragma: no cover
     T = q_m.shape[0]
     q_out = np.empty(T)
     w_out = np.empty(T)
@@ -165,7 +188,11 @@ def _run_py(q_m, qd_m, dt, n_sub, I, mglx, mgly, fr, kind, P, gap, N, amps, phas
     I_min = I
     if ctx:
         I_min = I + cI.min()
-    if eps > 0.0 and h * max(fr[0] + fr[4], fr[1] + fr[5]) > eps * I_min:
+    rip = r_amps.shape[0] > 0
+    r_max = 0.0
+    for j in range(r_amps.shape[0]):
+        r_max += abs(r_amps[j])
+    if eps > 0.0 and h * (max(fr[0] + fr[4], fr[1] + fr[5]) + r_max) > eps * I_min:
         eps = 0.0                                # stiffer than the step resolves: sign
     bw = kind == 2
     q = q0
@@ -206,6 +233,7 @@ def _run_py(q_m, qd_m, dt, n_sub, I, mglx, mgly, fr, kind, P, gap, N, amps, phas
             if ctx:
                 F += tx
             p = Ii * w + h * F                   # momentum without friction
+            rp = _ripple(qmid, r_orders, r_amps, r_phases) if rip else 0.0      # the Coulomb level's ripple
             if eps > 0.0:
                 # Ii w1 + h fr((w + w1) / 2) = p, fr(x) = C(x) tanh(x / eps) + V(x) x: Newton
                 w1 = w
@@ -214,7 +242,7 @@ def _run_py(q_m, qd_m, dt, n_sub, I, mglx, mgly, fr, kind, P, gap, N, amps, phas
                     j = 0 if wf >= 0.0 else 1
                     r = (abs(wf) / fr[6 + j]) ** expo
                     ex = math.exp(-r)
-                    C = fr[j] + fr[4 + j] * ex
+                    C = fr[j] + rp + fr[4 + j] * ex
                     dC = 0.0
                     if fr[4 + j] != 0.0 and wf != 0.0:
                         dC = -fr[4 + j] * ex * expo * r / wf
@@ -232,7 +260,7 @@ def _run_py(q_m, qd_m, dt, n_sub, I, mglx, mgly, fr, kind, P, gap, N, amps, phas
             elif w != 0.0:
                 sg = 1.0 if w > 0.0 else -1.0
                 j = 0 if w > 0.0 else 1
-                C = fr[j] + fr[4 + j] * math.exp(-(abs(w) / fr[6 + j]) ** expo)
+                C = fr[j] + rp + fr[4 + j] * math.exp(-(abs(w) / fr[6 + j]) ** expo)
                 mass = Ii + 0.5 * h * fr[2 + j]
                 w1 = (p - 0.5 * h * fr[2 + j] * w - sg * h * C) / mass
                 if w1 * sg >= 0.0:               # slides one way all along
@@ -247,7 +275,7 @@ def _run_py(q_m, qd_m, dt, n_sub, I, mglx, mgly, fr, kind, P, gap, N, amps, phas
                     if ctx:
                         F2 += tx
                     j2 = 0 if F2 > 0.0 else 1
-                    static = fr[j2] + fr[4 + j2]
+                    static = fr[j2] + fr[4 + j2] + (_ripple(q_stop, r_orders, r_amps, r_phases) if rip else 0.0)
                     if abs(F2) <= static:        # sticks
                         w = 0.0
                         q = q_stop
@@ -257,7 +285,7 @@ def _run_py(q_m, qd_m, dt, n_sub, I, mglx, mgly, fr, kind, P, gap, N, amps, phas
                         q = q_stop + 0.5 * h2 * w
             else:                                # at rest: sticks or breaks away
                 j = 0 if F > 0.0 else 1
-                static = fr[j] + fr[4 + j]
+                static = fr[j] + rp + fr[4 + j]
                 if abs(F) > static:
                     sg = 1.0 if F > 0.0 else -1.0
                     w = h * (F - sg * static) / (Ii + 0.5 * h * fr[2 + j])
@@ -270,13 +298,13 @@ def _run_py(q_m, qd_m, dt, n_sub, I, mglx, mgly, fr, kind, P, gap, N, amps, phas
     return q_out, w_out, tau_out
 
 
-_engaged = _bouc_wen_step = _spring_torque = _te_value = None    # compiled by _kernel()
+_engaged = _bouc_wen_step = _spring_torque = _te_value = _ripple = None    # compiled by _kernel()
 
 
 def _kernel():
     """The compiled kernel (numba is imported on first use). The helpers are module globals
     compiled here, so that numba's on-disk cache holds (it misses on closures)."""
-    global _KERNEL, _engaged, _bouc_wen_step, _spring_torque, _te_value
+    global _KERNEL, _engaged, _bouc_wen_step, _spring_torque, _te_value, _ripple
     if _KERNEL is not None:
         return _KERNEL
     from numba import njit
@@ -285,6 +313,7 @@ def _kernel():
     _bouc_wen_step = njit(cache=True)(_bouc_wen_step_py)
     _spring_torque = njit(cache=True)(_spring_torque_py)
     _te_value = njit(cache=True)(_te_value_py)
+    _ripple = njit(cache=True)(_ripple_py)
     _KERNEL = njit(cache=True)(_run_py)
     return _KERNEL
 
@@ -339,7 +368,7 @@ def link_forward(q_m, fs_hz: float, *, I: float, mglx: float, mgly: float, frict
         n_sub = max(n_sub, int(math.ceil(rate * dt / 0.5)))
     q, w, tau = _kernel()(q_m, qd_m, dt, n_sub, float(I), float(mglx), float(mgly), fr, int(kind), P, float(gap), N,
                           amps, phases, orders, float(q0), float(qd_m[0] if w0 is None else w0), ctx, cI, cgx, cgy,
-                          cex)
+                          cex, *encode_ripple(friction))
     if not (np.isfinite(q).all() and np.isfinite(tau).all()):
         raise RuntimeError("the link simulation left the finite numbers (a spring or friction law without a "
                            "stable motion under this motor trajectory)")

@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 
 from mocapfj.dynamics import (AsymmetricCoulombViscous, Backlash, BoucWen, CoulombViscous, Drivetrain, LinearSpring,
-                              PiecewiseSpring, PrescribedMotor, SingleJoint, Stribeck, TransmissionError, simulate)
+                              PiecewiseSpring, PositionDependent, PrescribedMotor, SingleJoint, Stribeck,
+                              TransmissionError, simulate)
 from mocapfj.dynamics.link_forward import link_forward
 from mocapfj.dynamics.link_response import link_response
 from mocapfj.errors import InputError
@@ -30,6 +31,11 @@ ELEMENTS = {
                   PiecewiseSpring(k1=8e3, k2=1.2e4, k3=1.6e4, tau1=20, tau2=60), None),
     "transmission_error": (CoulombViscous(9.28, 18.4, smoothing=EPS), LinearSpring(K),
                            TransmissionError(50, (6e-5, 3e-5), (0.3, 1.0), (1.0, 2.0))),
+    # a Coulomb ripple with the link angle (discovery's position-dependent friction), over a
+    # Stribeck law: before, only the general integrator ran it (36 minutes for one discovery)
+    "position_dependent": (PositionDependent(Stribeck(fc=9, fs=12, vs=0.05, fv=18, exponent=2, smoothing=EPS),
+                                             orders=(3.0, 7.0), amplitudes=(1.5, 0.8), phases=(0.2, 1.1)),
+                           LinearSpring(K), None),
     "stribeck_free_play_bouc_wen": (Stribeck(fc=9, fs=15, vs=0.05, fv=18, exponent=2, smoothing=EPS),
                                     Backlash(3e-4, BoucWen(k=K, alpha=0.6, beta=1000, gamma=3000)), None),
 }
