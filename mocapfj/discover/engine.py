@@ -228,8 +228,8 @@ def offset_with_split(f: dict, sds: dict | None, nominal=None) -> None:
     determined at SD s_v, the offset's SD takes s_v / k beside the noise's; with v not determined,
     every d' that keeps v and b physical, d - v / k to d + b / k, fits alike: the offset is
     reported as not determined within that range, with the RMS error of d for an offset uniform
-    over it (sqrt(width^2 / 12 + (d - middle)^2)). On the heavy joint of the grid (seed 32000, case 001, -0.45 ms planted, no model
-    file) the identification held b at zero and took v = 744 for 446 N m s/rad: the offset named,
+    over it (sqrt(width^2 / 12 + (d - middle)^2)). On the heavy joint of the grid (seed 32000,
+    case 001, -0.45 ms planted, no model file) the identification held b at zero and took v = 744 for 446 N m s/rad: the offset named,
     -0.25 ms, had an SD of 0.006 ms from the noise; the range is -0.80 to -0.25 ms."""
     got = _offset_split(f, nominal)
     if got is None:
@@ -1464,8 +1464,8 @@ def _discover(signals: dict, models: dict, ahead, *, parallel: bool = True, fs_h
                                                                        "held_out_with_nominal_held")
                                             if k in f["score"]}},
                             "parameters": c.params,
-                            **{k: f["score"][k] for k in ("parameter_sds", "not_determined", "nominal_refitted", "sds_with_nominal_free")
-                               if k in f["score"]},
+                            **{k: f["score"][k] for k in ("parameter_sds", "not_determined", "nominal_refitted",
+                                                          "sds_with_nominal_free") if k in f["score"]},
                             "p_value": f["p_value"], "fit_gain_pct": f.get("fit_gain_pct"), "runner_up": f["runner_up"],
                             **({"confirmed_by_reidentification": f["confirmed"]} if "confirmed" in f else {})})
     remaining = {jn: _remaining(fams[jn], signals[jn]) for jn in names}

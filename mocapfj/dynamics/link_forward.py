@@ -76,10 +76,12 @@ def encode_friction(fr) -> np.ndarray | None:
 
 
 def encode_ripple(fr) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(orders, amplitudes, phases) of a :class:`.PositionDependent` law's ripple, each (K,);
+    """(orders, amplitudes, phases + pi / 2) of a :class:`.PositionDependent` law's ripple, each
+    (K,), so that the kernel's sine sum (the transmission error's, with N = 1) gives its cosines;
     empty for any other law."""
     if type(fr) is PositionDependent:
-        return tuple(np.asarray(getattr(fr, n), dtype=np.float64) for n in ("orders", "amplitudes", "phases"))
+        return (np.asarray(fr.orders, dtype=np.float64), np.asarray(fr.amplitudes, dtype=np.float64),
+                np.asarray(fr.phases, dtype=np.float64) + 0.5 * math.pi)
     return np.zeros(0), np.zeros(0), np.zeros(0)
 
 
@@ -169,12 +171,6 @@ def _te_value_py(qm, N, amps, phases, orders):  # pragma: no cover - compiled
         s += amps[j] * math.sin(orders[j] * N * qm + phases[j])
     return s
 
-def _ripple_py(q, r_orders, r_amps, r_phases):  # pragma: no cover - compiled
-    s = 0.0
-    for j in range(r_amps.shape[0]):
-        s += r_amps[j] * math.cos(r_orders[j] * q + r_phases[j])
-    return s
-
 
 def _run_py(q_m, qd_m, dt, n_sub, I, mglx, mgly, fr, kind, P, gap, N, amps, phases, orders, q0, w0,
             ctx, cI, cgx, cgy, cex, r_orders, r_amps, r_phases):  # pragma: no cover
@@ -188,11 +184,8 @@ def _run_py(q_m, qd_m, dt, n_sub, I, mglx, mgly, fr, kind, P, gap, N, amps, phas
     I_min = I
     if ctx:
         I_min = I + cI.min()
-    rip = r_amps.shape[0] > 0
-    r_max = 0.0
-    for j in range(r_amps.shape[0]):
-        r_max += abs(r_amps[j])
-    if eps > 0.0 and h * (max(fr[0] + fr[4], fr[1] + fr[5]) + r_max) > eps * I_min:
+    rip = r_amps.shape[0] > 0                    # a Coulomb ripple with the link angle (encode_ripple)
+    if eps > 0.0 and h * (max(fr[0] + fr[4], fr[1] + fr[5]) + np.abs(r_amps).sum()) > eps * I_min:
         eps = 0.0                                # stiffer than the step resolves: sign
     bw = kind == 2
     q = q0
@@ -233,7 +226,7 @@ def _run_py(q_m, qd_m, dt, n_sub, I, mglx, mgly, fr, kind, P, gap, N, amps, phas
             if ctx:
                 F += tx
             p = Ii * w + h * F                   # momentum without friction
-            rp = _ripple(qmid, r_orders, r_amps, r_phases) if rip else 0.0      # the Coulomb level's ripple
+            rp = _te_value(qmid, 1.0, r_amps, r_phases, r_orders) if rip else 0.0      # the Coulomb ripple
             if eps > 0.0:
                 # Ii w1 + h fr((w + w1) / 2) = p, fr(x) = C(x) tanh(x / eps) + V(x) x: Newton
                 w1 = w
@@ -275,7 +268,7 @@ def _run_py(q_m, qd_m, dt, n_sub, I, mglx, mgly, fr, kind, P, gap, N, amps, phas
                     if ctx:
                         F2 += tx
                     j2 = 0 if F2 > 0.0 else 1
-                    static = fr[j2] + fr[4 + j2] + (_ripple(q_stop, r_orders, r_amps, r_phases) if rip else 0.0)
+                    static = fr[j2] + fr[4 + j2] + (_te_value(q_stop, 1.0, r_amps, r_phases, r_orders) if rip else 0.0)
                     if abs(F2) <= static:        # sticks
                         w = 0.0
                         q = q_stop
@@ -298,13 +291,13 @@ def _run_py(q_m, qd_m, dt, n_sub, I, mglx, mgly, fr, kind, P, gap, N, amps, phas
     return q_out, w_out, tau_out
 
 
-_engaged = _bouc_wen_step = _spring_torque = _te_value = _ripple = None    # compiled by _kernel()
+_engaged = _bouc_wen_step = _spring_torque = _te_value = None    # compiled by _kernel()
 
 
 def _kernel():
     """The compiled kernel (numba is imported on first use). The helpers are module globals
     compiled here, so that numba's on-disk cache holds (it misses on closures)."""
-    global _KERNEL, _engaged, _bouc_wen_step, _spring_torque, _te_value, _ripple
+    global _KERNEL, _engaged, _bouc_wen_step, _spring_torque, _te_value
     if _KERNEL is not None:
         return _KERNEL
     from numba import njit
@@ -313,7 +306,6 @@ def _kernel():
     _bouc_wen_step = njit(cache=True)(_bouc_wen_step_py)
     _spring_torque = njit(cache=True)(_spring_torque_py)
     _te_value = njit(cache=True)(_te_value_py)
-    _ripple = njit(cache=True)(_ripple_py)
     _KERNEL = njit(cache=True)(_run_py)
     return _KERNEL
 
