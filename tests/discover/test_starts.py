@@ -274,3 +274,40 @@ def test_breakaway_friction_below_a_tanh_laws_smoothing_is_a_candidate():
     fits = [simulate_joint(m, v.t, v.q, v.q_m, v.u, band_hz=ev.band_hz).fit
             for m in (nominal, true, cand.apply(nominal))]
     assert fits[2] - fits[0] >= 0.5 * (fits[1] - fits[0]) > 0, fits
+
+
+def test_breakaway_friction_a_spot_model_took_into_its_levels_is_fitted_beside_them():
+    """A PA-10 joint of the hinge grid (seed 35000, case 0: a tanh law, Coulomb 7.68 N m, viscous
+    19.6 N m s/rad) with a breakaway friction of 6.98 N m at vs 0.031 rad/s, exponent 1. The model
+    identified on that trial without the breakaway took part of it into its levels: c 9.19 and
+    v 14.6 (here: the true nominal with those two levels). Over them the excess was 0.5 N m and the
+    candidate lowered the validation recording's fit. The form fitted beside the levels is a start;
+    refitted as the tournament does, its levels come back within 10 % of the true ones and it
+    recovers at least half of the gap between that nominal and the true model on a validation
+    recording (measured: c 7.51, v 20.1, excess 7.56 N m at vs 0.0303 rad/s; 99.8 % of the gap)."""
+    from mocapfj.dynamics import CoulombViscous, Stribeck
+    from mocapfj.synth.hinge import sample_cases
+
+    case = sample_cases(6, 35000)[0]
+    excess, vs = 6.9803242, 0.031399213
+    planted = replace(case, friction_kind="stribeck", friction_params=(excess, vs, 1.0))
+    s, true_nominal, _ = _planted(case, friction_kind="stribeck", friction_params=(excess, vs, 1.0))
+    nominal = true_nominal.with_(friction=CoulombViscous(c=9.19, v=14.58, smoothing=case.eps_rad_s))
+    sj = s["j1"]
+    ref = simulate_joint(nominal, sj.t, sj.q, sj.q_m, sj.u)
+    ev = Evidence(sj, {}, ref.band_hz, noise_from=ref)
+    fam = engine._families_all({"j1": nominal}, s, sj.fs_hz)[0]["j1"]
+    train = np.arange(fam.t.size) < int(0.7 * fam.t.size)
+    first = FITTERS["stribeck"](fam, train & fam.residual("link")[1], {})
+    assert first is not None, "no stribeck candidate"
+    assert any(c.theta.size == 4 for c in (first, *first.starts)), "no start beside the levels"
+    starts = sorted((first, *first.starts), key=lambda c: -ev.fit(c.apply(nominal)))[:SCAN_KEEP]
+    cand = max((refit(c, nominal, ev) for c in starts), key=lambda x: x[2])[0]
+    p = cand.params
+    assert p["fc"] == pytest.approx(case.c, rel=0.1) and p["fv"] == pytest.approx(case.v, rel=0.1), p
+    true = true_nominal.with_(friction=Stribeck(fc=case.c, fs=case.c + excess, vs=vs, fv=case.v, exponent=1.0,
+                                                smoothing=case.eps_rad_s))
+    v = mocapfj.signals(simulate_hinge(replace(planted, seed=planted.seed + 7))[0])["j1"]
+    fits = [simulate_joint(m, v.t, v.q, v.q_m, v.u, band_hz=ev.band_hz).fit
+            for m in (nominal, true, cand.apply(nominal))]
+    assert fits[2] - fits[0] >= 0.5 * (fits[1] - fits[0]) > 0, fits
