@@ -655,32 +655,28 @@ def stribeck(fam: Families, mask, others) -> Candidate | None:
     sv = max(abs(fv), 1e-6)
 
     def build(th, x, contribution):
-        # theta: log(excess / fc), log vs; and in the form fitted beside the nominal law's levels,
-        # log(fc' / fc) and (fv' - fv) / |fv| (an identification without the breakaway takes part
+        # theta: log(excess / fc), log vs; in the form fitted beside the nominal law's levels also
+        # log(fc' / fc) and (fv' - fv) / |fv| (a model identified without the breakaway takes part
         # of it into a higher Coulomb and a lower viscous level)
+        levels = len(th) > 2
         peak, vs = float(fc * np.exp(th[0]) if fc > 0 else np.exp(th[0])), float(np.exp(th[1]))
-        fc1 = float(fc * np.exp(th[2])) if len(th) > 2 else fc
-        fv1 = float(max(fv + th[3] * sv, 0.0)) if len(th) > 3 else fv
-        return _stribeck_candidate(th, x, contribution, peak, vs, fc1, fv1, (fc, fv))
-
-    def _stribeck_candidate(th, x, contribution, peak, vs, fc, fv, nominal):
-        params = {"fs": fc + peak, "fc": fc, "vs": vs, "fv": fv, "exponent": x}
+        c1 = float(fc * np.exp(th[2])) if levels else fc
+        v1 = float(max(fv + th[3] * sv, 0.0)) if levels else fv
+        params = {"fs": c1 + peak, "fc": c1, "vs": vs, "fv": v1, "exponent": x}
         loc = {"signal": "link torque", "where": f"low speed, |q'| < {3 * vs:.3g} rad/s, both signs",
                "velocity_rad_s": vs, "excess_Nm": peak}
 
-        levels = len(th) > 2
-
         def explain(g):
-            moved = (f" The Coulomb and viscous levels are fitted beside it ({nominal[0]:.3g} -> {fc:.3g} N m, "
-                     f"{nominal[1]:.3g} -> {fv:.3g} N m s/rad): a model without the breakaway takes part of it "
+            moved = (f" The Coulomb and viscous levels are fitted beside it ({fc:.3g} -> {c1:.3g} N m, "
+                     f"{fv:.3g} -> {v1:.3g} N m s/rad): a model without the breakaway takes part of it "
                      f"into a higher Coulomb and a lower viscous level." if levels else "")
             return (f"At low speed (|q'| below about {3 * vs:.3g} rad/s, on both signs) the joint needs "
                     f"{peak:.2f} N m more than Coulomb plus viscous friction predict, falling off over a Stribeck "
                     f"velocity of {vs:.3g} rad/s (exponent {x:g}): the breakaway friction of the lubricated gear "
-                    f"and bearing contacts (static {fc + peak:.2f} N m vs sliding {fc:.2f} N m, Oueslati et al. "
+                    f"and bearing contacts (static {c1 + peak:.2f} N m vs sliding {c1:.2f} N m, Oueslati et al. "
                     f"(2012), eq. 7).{moved}")
         return Candidate("stribeck", "link", params, 4 if levels else 2, contribution,
-                         lambda m: m.with_(friction=Stribeck(fc=fc, fs=fc + peak, vs=vs, fv=fv, exponent=x,
+                         lambda m: m.with_(friction=Stribeck(fc=c1, fs=c1 + peak, vs=vs, fv=v1, exponent=x,
                                                              smoothing=eps)), loc,
                          explain, np.asarray(th, float),
                          np.array([0.5, 0.5, 0.05, 0.1]) if levels else np.array([0.5, 0.5]),
@@ -722,8 +718,7 @@ def stribeck(fam: Families, mask, others) -> Candidate | None:
             fj = [(v, *_ls(cols(v, x) + lv_cols, y, mask)) for v in vss]
             okj = [f for f in fj if f[1][0] > 0 and fc + f[1][2] > 0]
             if okj:
-                vj = min(okj, key=lambda f: f[2])[0]
-                cj, rssj = _ls(cols(vj, x) + lv_cols, y, mask)
+                vj, cj, rssj = min(okj, key=lambda f: f[2])
                 forms.append((rssj, x, np.array([np.log(cj[0] / fc), np.log(vj), np.log((fc + cj[2]) / fc),
                                                  cj[3] / sv]),
                               np.column_stack(cols(vj, x) + lv_cols) @ cj))
