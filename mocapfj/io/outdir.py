@@ -96,8 +96,10 @@ def staged_output(out) -> Iterator[Path]:
     stage = out.parent / f".{out.name}.{os.getpid()}{_STAGE}"
     if stage.exists():
         shutil.rmtree(stage)
-    stage.mkdir()
     try:
+        # made inside the try: a Ctrl-C landing between the mkdir and the try left the staging
+        # directory behind (tests/test_bad_input.py, under load)
+        stage.mkdir()
         yield stage
         (stage / MARKER).write_text("written by mocapfj; a later run into this directory replaces it\n",
                                     encoding="utf-8")
