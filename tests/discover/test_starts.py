@@ -45,6 +45,22 @@ def _best_refit(name, s, nominal, ev):
     return best[0], best[2]
 
 
+def _as_judged(cand, nominal, ev):
+    """The candidate as the tournament judges it: the SCAN_KEEP starts that fit `ev` best as they
+    are, refitted, the best kept."""
+    starts = sorted((cand, *cand.starts), key=lambda c: -ev.fit(c.apply(nominal)))[:SCAN_KEEP]
+    return max((refit(c, nominal, ev) for c in starts), key=lambda x: x[2])[0]
+
+
+def _recovers_half_the_gap(planted, ev, nominal, true, cand):
+    """On a validation recording of `planted` (new noise), `cand` on `nominal` recovers at least
+    half of the gap between `nominal` and `true`, in `ev`'s band."""
+    v = mocapfj.signals(simulate_hinge(replace(planted, seed=planted.seed + 7))[0])["j1"]
+    fits = [simulate_joint(m, v.t, v.q, v.q_m, v.u, band_hz=ev.band_hz).fit
+            for m in (nominal, true, cand.apply(nominal))]
+    assert fits[2] - fits[0] >= 0.5 * (fits[1] - fits[0]) > 0, fits
+
+
 def test_a_stiffening_spring_on_a_joint_held_off_zero_by_gravity():
     """A heavy joint works 2.5 mrad from zero (deflection SD 0.37 mrad) with a cubic spring that
     doubles its stiffness at |mean| + 2 SD. The three slopes of an odd spring fit it 190x stiffer
@@ -257,8 +273,7 @@ def test_breakaway_friction_below_a_tanh_laws_smoothing_is_a_candidate():
     first = FITTERS["stribeck"](fam, train & fam.residual("link")[1], {})
     assert first is not None, "no stribeck candidate"
     # as the tournament judges it: the SCAN_KEEP starts that fit best as they are, refitted
-    starts = sorted((first, *first.starts), key=lambda c: -ev.fit(c.apply(nominal)))[:SCAN_KEEP]
-    cand = max((refit(c, nominal, ev) for c in starts), key=lambda x: x[2])[0]
+    cand = _as_judged(first, nominal, ev)
     mask = train & fam.residual("link")[1]
 
     def excess_rss(v):                          # the excess's equation-error fit at vs = v
@@ -270,10 +285,7 @@ def test_breakaway_friction_below_a_tanh_laws_smoothing_is_a_candidate():
     assert unconstrained[0] < 0, unconstrained           # why the constraint matters on this recording
     true = nominal.with_(friction=Stribeck(fc=case.c, fs=case.c + excess, vs=vs, fv=case.v, exponent=2.0,
                                            smoothing=case.eps_rad_s))
-    v = mocapfj.signals(simulate_hinge(replace(planted, seed=planted.seed + 7))[0])["j1"]
-    fits = [simulate_joint(m, v.t, v.q, v.q_m, v.u, band_hz=ev.band_hz).fit
-            for m in (nominal, true, cand.apply(nominal))]
-    assert fits[2] - fits[0] >= 0.5 * (fits[1] - fits[0]) > 0, fits
+    _recovers_half_the_gap(planted, ev, nominal, true, cand)
 
 
 def test_breakaway_friction_a_spot_model_took_into_its_levels_is_fitted_beside_them():
@@ -306,13 +318,9 @@ def test_breakaway_friction_a_spot_model_took_into_its_levels_is_fitted_beside_t
     first = FITTERS["stribeck"](fam, train & fam.residual("link")[1], {})
     assert first is not None, "no stribeck candidate"
     assert any(c.theta.size == 4 for c in (first, *first.starts)), "no start beside the levels"
-    starts = sorted((first, *first.starts), key=lambda c: -ev.fit(c.apply(nominal)))[:SCAN_KEEP]
-    cand = max((refit(c, nominal, ev) for c in starts), key=lambda x: x[2])[0]
+    cand = _as_judged(first, nominal, ev)
     p = cand.params
     assert p["fc"] == pytest.approx(case.c, rel=0.1) and p["fv"] == pytest.approx(case.v, rel=0.1), p
     true = true_nominal.with_(friction=Stribeck(fc=case.c, fs=case.c + excess, vs=vs, fv=case.v, exponent=1.0,
                                                 smoothing=case.eps_rad_s))
-    v = mocapfj.signals(simulate_hinge(replace(planted, seed=planted.seed + 7))[0])["j1"]
-    fits = [simulate_joint(m, v.t, v.q, v.q_m, v.u, band_hz=ev.band_hz).fit
-            for m in (nominal, true, cand.apply(nominal))]
-    assert fits[2] - fits[0] >= 0.5 * (fits[1] - fits[0]) > 0, fits
+    _recovers_half_the_gap(planted, ev, nominal, true, cand)
