@@ -16,10 +16,11 @@ made
   of the residual that does not repeat. An identification excitation is periodic (a Fourier series
   or a multisine: Swevers, Ganseman, Tukel, de Schutter and Van Brussel 1997; Pintelon and
   Schoukens 2012, ch. 2), and so is everything a deterministic model predicts for it once the
-  start has died out; what changes from period to period is noise. With P whole periods the
-  noise variance is half the mean square of the difference between consecutive periods (averaged
-  over the pairs, one above 4 x their median left out: a disturbed period such as a start ramp
-  does not decide it), estimated per channel on the
+  start has died out; what changes from period to period is noise. The noise variance is that
+  of the residual's samples about their mean at the same phase of every period (scaled by
+  c / (c - 1) for c periods), over every sample the fit squares (a period all of whose
+  differences from its neighbours are above 4 x the median left out: a disturbed period such as
+  a start ramp does not decide it), estimated per channel on the
   in-band residual itself, so it holds for coloured noise and for the encoder noise the
   prediction carries. Without a period (|autocorrelation| of the motor angle below
   :data:`MIN_PERIOD_CORR` at every lag between 0.5 s and half the recording) the floor is the
@@ -134,7 +135,7 @@ def excitation_period_s(x: np.ndarray, fs_hz: float, min_s: float = 0.5) -> floa
 class Channel:
     """One channel's comparison in the band: fit %, floor % (the fit a perfect model would reach),
     the in-band noise SD (the channel's unit), how it was estimated ("periods" or "white"), the
-    pairs of consecutive periods used, and the floor's own SD in points (periods: from the variance estimate's
+    pairs of consecutive periods the estimate is worth (rounded), and the floor's own SD in points (periods: from the variance estimate's
     degrees of freedom, 2 band x period per pair of periods; NaN for the white floor, which is an
     upper bound of the floor when the noise is coloured); sd_y: the recorded signal's SD in the
     band (what the fit is normalised by)."""
@@ -156,26 +157,46 @@ class Channel:
         return 1.0 - self.floor / 100.0
 
 
-def _period_noise_var(r: np.ndarray, fs_hz: float, period_s: float) -> tuple[float, int]:
-    """(variance, pairs of periods used) of the part of r (n,) (uniform, no NaN) that differs
-    between consecutive periods: half the mean square of their difference, averaged over the pairs
-    of periods, leaving out a pair above 4 x their median."""
+def _period_noise_var(r: np.ndarray, fs_hz: float, period_s: float) -> tuple[float, float]:
+    """(variance, pairs of periods it is worth) of the part of r (n,) (uniform, no NaN) that
+    differs between periods, over every sample of r: resampled at M phases per period, the c
+    samples of one phase (one per period, the last period a part) have sum of noise variances
+    c / (c - 1) sum (r_a - mean)^2, whatever each sample's own variance; summed over the phases
+    and divided by the samples, it is the mean noise variance of exactly the samples the fit
+    squares. A period whose differences from its neighbours are all above 4 x the median of the
+    consecutive periods' (three pairs or more) is left out (a start ramp the model does not
+    repeat). Worth: sum over the phases of (c - 1) / M, consecutive pairs' equivalent."""
     from scipy.interpolate import CubicSpline
 
     n = r.size
     span = (n - 1) / fs_hz
     P = int(span // period_s)
     if P < 2:
-        return math.nan, 0
-    t = np.arange(n) / fs_hz
-    start = span - P * period_s                              # the last P periods (the start is
-    M = int(period_s * fs_hz)                                # the one a ramp disturbs)
-    grid = start + np.arange(P)[:, None] * period_s + np.arange(M)[None, :] / fs_hz
-    R = CubicSpline(t, r)(np.minimum(grid, span))
-    v = 0.5 * np.mean(np.diff(R, axis=0) ** 2, axis=1)
-    if v.size >= 3:
-        v = v[v <= 4.0 * np.median(v)]          # a disturbed period out (a start ramp); marker
-    return float(np.mean(v)), v.size            # dropouts, unevenly spread, stay in
+        return math.nan, 0.0
+    M = int(round(period_s * fs_hz))
+    tau = np.arange(P + 1)[:, None] * period_s + np.arange(M)[None, :] * (period_s / M)
+    valid = tau <= span
+    R = CubicSpline(np.arange(n) / fs_hz, r)(np.minimum(tau, span))
+    both = valid[:-1] & valid[1:]
+    pair = np.array([0.5 * np.mean(np.diff(R[i:i + 2, b], axis=0) ** 2) if b.sum() >= M // 4 else np.nan
+                     for i, b in enumerate(both)])
+    full = pair[np.isfinite(pair)]
+    if full.size >= 3:
+        bad = np.nan_to_num(pair, nan=0.0) > 4.0 * np.median(full)
+        # a period is disturbed when every difference it takes part in is (those it has)
+        has = np.isfinite(pair)
+        for i in range(P + 1):
+            mine = [k for k in (i - 1, i) if 0 <= k < pair.size and has[k]]
+            if mine and all(bad[k] for k in mine):
+                valid[i] = False
+    c = valid.sum(axis=0)
+    use = c >= 2
+    if not use.any():
+        return math.nan, 0.0
+    V, Rv, cu = valid[:, use], R[:, use], c[use]
+    mean = (Rv * V).sum(axis=0) / cu
+    s2 = (((Rv - mean) ** 2) * V).sum(axis=0) * cu / (cu - 1)
+    return float(s2.sum() / V.sum()), float((cu - 1).sum() / M)
 
 
 def in_band(x: np.ndarray, fs_hz: float, band_hz: float) -> np.ndarray:
@@ -225,7 +246,7 @@ def compare_channel(y: np.ndarray, y_hat: np.ndarray, raw: np.ndarray | None, fs
     if method == "periods":
         dof = max(1.0, pairs * 2.0 * band_hz * period_s)
         floor_sd = float(100.0 * sd / sd_y * math.sqrt(1.0 / (2.0 * dof)))
-    return Channel(fit=fit, floor=floor, noise_sd=sd, method=method, n_pairs=int(pairs) if method == "periods" else 0,
+    return Channel(fit=fit, floor=floor, noise_sd=sd, method=method, n_pairs=int(round(pairs)) if method == "periods" else 0,
                    floor_sd=floor_sd, sd_y=sd_y)
 
 

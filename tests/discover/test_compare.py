@@ -66,6 +66,25 @@ def test_floor_is_the_in_band_noise_and_the_true_prediction_scores_at_it(kind):
     assert ch.floor - off.fit == pytest.approx(100 * (math.sqrt(e_f ** 2 + a ** 2) - e_f), abs=0.3)
 
 
+def test_floor_covers_every_sample_the_fit_squares_when_the_noise_changes_over_the_record():
+    """2.9 periods of a 15 s excitation whose noise is 1.5x larger over the first 14 s (markers
+    dropping out while one pose lasts): predicted by the periodic signal itself, the fit is the
+    floor within 0.3 points on average over 10 noise draws and within 1 point in each. Estimated
+    from the last two whole periods alone, the floor was 1.7 points above the fit on average (a
+    heavy joint's 47 s validation recording of hinge grid seed 36000: its true model 1.9 points
+    below the floor)."""
+    t = np.arange(0, 44.0, 1 / FS)
+    y0 = sum(np.sin(2 * np.pi * (i + 1) * t / 15.0 + i) / (i + 1) for i in range(5))
+    sd = np.where(t < 14.0, 0.6, 0.4)
+    gaps = []
+    for seed in range(10):
+        y = y0 + sd * np.random.default_rng(seed).normal(size=t.size)
+        ch = compare_channel(y, y0, None, FS, 5.0, np.ones(t.size, bool), 15.0)
+        assert ch.method == "periods"
+        gaps.append(ch.floor - ch.fit)
+    assert abs(np.mean(gaps)) < 0.3 and np.max(np.abs(gaps)) < 1.0
+
+
 def test_true_model_of_an_independent_simulator_scores_at_its_floor():
     """A cobot joint of the hinge grid (PD-controlled simulation with coloured torque noise and a
     tanh friction law, 0.5 mm-class markers: its full-rate deflection fit is far below 50 %) with
