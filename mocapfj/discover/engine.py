@@ -810,8 +810,9 @@ def _refit_with_nominal(jn, judge, nominal, found, current, rejected, held_out, 
     further from the file than the refit of them all does: the recordings then do not tell the
     effect from that change of the file's values, and the file, evidence of its own, keeps it
     (reported with the change: `or_model_file_change`). A friction asymmetry beside a hysteresis
-    on a light cobot, the true nominal given, was so removed: without it the file's mgly moved
-    +48 % (31 SDs) and fitted the validation recording within 0.01 points (seed 36000, case 000).
+    on a light cobot, the true nominal given, was so removed: without it the file's b moved
+    0.82 -> 0.72 (14 SDs) and mgly +48 %, and fitted the validation recording within 0.01 points
+    (seed 36000, case 000).
     Only when the refit is adopted or the
     nominal model was identified on this trial (`from_trial`): a model from elsewhere is evidence
     of its own, and a clock offset reads in the band as a change of viscous friction (step 5): on
