@@ -89,3 +89,18 @@ def test_a_reidentified_spring_that_softens_is_a_finding_not_a_stiffening():
     assert "fitted with a time_delay" in f["finding"] and "sticks and slips" in f["finding"]
     stiff = [{"name": "stiffening", "parameters": {**soft[0]["parameters"], "k3": 9.66e8}}]
     assert engine._softening(stiff) is None and engine._softening(soft[1:]) is None
+
+
+def test_a_stiffness_change_of_a_spot_model_refines_it_and_is_no_missing_physics():
+    """engine._refines_nominal and the verdict: a change of the stiffness of a nominal model
+    identified on the trial is that identification refined, reported beside "no missing physics
+    found" (a light cobot control without a model file named "stiffness", k +15.5 %: hinge grid
+    seed 37000, case 000); from a model file it stays an effect (the file's stiffness is off)."""
+    f = {"name": "stiffness", "candidate": object()}
+    assert engine._refines_nominal(f, True) and not engine._refines_nominal(f, False)
+    assert not engine._refines_nominal({"name": "stiffening", "candidate": object()}, True)
+    d = engine.Discovery(effects=[], models={}, nominal={}, fit_before={}, fit_after={}, fits={}, location={},
+                         validation=None, reidentified={"j1": {"stiffness_refined": {
+                             "k": 5522.6, "k_model": 4780.3, "change_pct": 15.53}}})
+    assert d.verdict == ("no missing physics found; the stiffness of the nominal model identified on the trial "
+                         "refined on j1 (k 5523 N m/rad, +15.5 %)")
