@@ -135,10 +135,11 @@ def excitation_period_s(x: np.ndarray, fs_hz: float, min_s: float = 0.5) -> floa
 class Channel:
     """One channel's comparison in the band: fit %, floor % (the fit a perfect model would reach),
     the in-band noise SD (the channel's unit), how it was estimated ("periods" or "white"), the
-    pairs of consecutive periods the estimate is worth (rounded), and the floor's own SD in points (periods: from the variance estimate's
-    degrees of freedom, 2 band x period per pair of periods; NaN for the white floor, which is an
-    upper bound of the floor when the noise is coloured); sd_y: the recorded signal's SD in the
-    band (what the fit is normalised by)."""
+    pairs of consecutive periods the estimate is worth (rounded), and the floor's own SD in points
+    (periods: from the variance estimate's degrees of freedom, 2 band x period per pair of periods;
+    white: the scatter of the noise realised in the band, 2 band x T degrees of freedom, about the
+    level read above it, which is an upper bound of the floor when the noise is coloured); sd_y:
+    the recorded signal's SD in the band (what the fit is normalised by)."""
 
     fit: float
     floor: float
@@ -242,10 +243,14 @@ def compare_channel(y: np.ndarray, y_hat: np.ndarray, raw: np.ndarray | None, fs
         var, method = v_per, "periods"
     sd = math.sqrt(max(var, 0.0))
     floor = float(100.0 * (1.0 - sd / sd_y)) if sd_y > 0 else math.nan
-    floor_sd = math.nan
+    # the floor's SD: the periods' estimate has about 2 band x period degrees of freedom per pair
+    # of periods; a white floor is a level read from the spectrum above the band, which the noise
+    # realised in the band, 2 band x T degrees of freedom, scatters about
     if method == "periods":
         dof = max(1.0, pairs * 2.0 * band_hz * period_s)
-        floor_sd = float(100.0 * sd / sd_y * math.sqrt(1.0 / (2.0 * dof)))
+    else:
+        dof = max(1.0, 2.0 * band_hz * rb.size / fs_hz)
+    floor_sd = float(100.0 * sd / sd_y * math.sqrt(1.0 / (2.0 * dof))) if sd_y > 0 else math.nan
     return Channel(fit=fit, floor=floor, noise_sd=sd, method=method, n_pairs=int(round(pairs)) if method == "periods" else 0,
                    floor_sd=floor_sd, sd_y=sd_y)
 
@@ -260,7 +265,6 @@ def combined_floor_sd(d: Channel, u: Channel) -> float:
     e = math.sqrt((d.e_floor ** 2 + u.e_floor ** 2) / 2.0)
     if not e > 0 or (math.isnan(d.floor_sd) and math.isnan(u.floor_sd)):
         return math.nan
-    # a white floor's channel counts with no SD of its own (its bias is not a scatter)
     return float(math.hypot(d.e_floor * np.nan_to_num(d.floor_sd), u.e_floor * np.nan_to_num(u.floor_sd)) / (2.0 * e))
 
 

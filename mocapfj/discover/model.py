@@ -182,7 +182,8 @@ class OutputError:
     normalised error of each, in the band the model claims (band_hz); floor_delta, floor_u, floor:
     the same for a perfect model (the recording's noise in that band: noise_delta_rad, noise_u_Nm,
     estimated by floor_method "periods" over the excitation's period_s or "white"), floor_sd,
-    floor_sd_delta, floor_sd_u the floors' SDs in points (NaN for a white floor);
+    floor_sd_delta, floor_sd_u the floors' SDs in points (a white floor's: the scatter of the
+    noise realised in the band);
     fit_full_delta, fit_full_u: the fits at full rate, noise included; sd_delta, sd_u: the recorded
     deflection's and torque's SDs in the band.
     """

@@ -85,6 +85,28 @@ def test_floor_covers_every_sample_the_fit_squares_when_the_noise_changes_over_t
     assert abs(np.mean(gaps)) < 0.3 and np.max(np.abs(gaps)) < 1.0
 
 
+def test_a_white_floor_has_the_sd_of_the_noise_realised_in_the_band():
+    """Without a period (a smoothed random walk, 30 s) the floor is the white level read above the
+    band; the true prediction's fit scatters about it by the noise realised in the band. Over 40
+    noise draws the floor's SD (2 band x T degrees of freedom) is within 0.6-1.5x the scatter of
+    floor - fit (1.90 and 2.25 points when written), whose mean is within 3 of its SEs of 0;
+    before, a white floor had no SD (NaN), and a true model 4.2 points above its floor (fresh
+    seed 37000, a light cobot's 22 s control without a period) lay outside any SD."""
+    t = np.arange(0, 30.0, 1 / FS)
+    walk = np.convolve(np.cumsum(np.random.default_rng(99).normal(size=t.size)), np.ones(200) / 200, "same")
+    walk = 0.02 * (walk - walk.mean()) / walk.std()
+    gaps, sds = [], []
+    for seed in range(40):
+        y = walk + 0.05 * np.random.default_rng(seed).normal(size=t.size)
+        ch = compare_channel(y, walk, y, FS, 5.0, np.ones(t.size, bool), None)
+        assert ch.method == "white"
+        gaps.append(ch.floor - ch.fit)
+        sds.append(ch.floor_sd)
+    spread = float(np.std(gaps))
+    assert 0.6 < np.mean(sds) / spread < 1.5
+    assert abs(np.mean(gaps)) < 3 * spread / math.sqrt(len(gaps))
+
+
 def test_true_model_of_an_independent_simulator_scores_at_its_floor():
     """A cobot joint of the hinge grid (PD-controlled simulation with coloured torque noise and a
     tanh friction law, 0.5 mm-class markers: its full-rate deflection fit is far below 50 %) with
