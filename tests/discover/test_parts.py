@@ -243,3 +243,31 @@ def test_a_free_play_wider_than_the_deflections_met_is_not_a_candidate_model():
     with pytest.raises(InputError, match="gap_rad"):
         cand.rebuild(np.array([np.log(1.01 * widest), 0.0]))
     assert cand.rebuild(np.array([np.log(0.99 * widest), 0.0])).apply(m).spring.gap == pytest.approx(0.99 * widest)
+
+
+def test_a_friction_asymmetry_keeps_every_friction_level_non_negative():
+    """effects.friction_asymmetry on a nominal model whose link viscous friction is 0 (a spot
+    model that put it in the motor's b) and a recording whose viscous friction differs with the
+    direction: the start's levels are all >= 0 (the viscous difference clipped to the model's 0,
+    the Coulomb difference fitted: c+- within 15 % of the planted ones), and a refit step that
+    takes a level below 0 is not physical (InputError), not a law for the general integrator
+    (hinge grid seed 38000, case 005, no model file: v_pos -0.019 N m s; over 10 minutes)."""
+    import mocapfj
+    from mocapfj.discover import effects, engine
+    from mocapfj.synth.hinge import simulate_hinge, small_grid
+
+    from .conftest import nominal_of
+
+    case = replace(small_grid(6)[0], friction_kind="asymmetric", friction_params=(0.2 * small_grid(6)[0].c,
+                                                                                   0.3 * small_grid(6)[0].v))
+    s = {"j1": mocapfj.signals(simulate_hinge(case)[0])["j1"]}
+    nominal = nominal_of(case)
+    spot = nominal.with_(friction=replace(nominal.friction, v=0.0), b=nominal.b + nominal.friction.v)
+    fams, _ = engine._families_all({"j1": spot}, s, s["j1"].fs_hz)
+    fam = fams["j1"]
+    cand = effects.friction_asymmetry(fam, fam.residual("link")[1], {})
+    p = cand.params
+    assert min(p.values()) >= 0.0 and p["v_pos"] == p["v_neg"] == 0.0, p
+    assert p["c_pos"] == pytest.approx(1.2 * case.c, rel=0.15) and p["c_neg"] == pytest.approx(0.8 * case.c, rel=0.15), p
+    with pytest.raises(InputError):
+        cand.rebuild(cand.theta + np.array([0.0, 0.01]))
