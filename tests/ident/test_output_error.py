@@ -292,3 +292,41 @@ def test_the_excitations_band_is_not_set_by_a_ringing_the_link_puts_on_the_motor
     ringing = q_m + a * np.sin(2 * np.pi * 15.0 * t)
     assert excitation_bandwidth_hz(ringing, fs, core=0.99) == pytest.approx(15.0, abs=0.03)
     assert excitation_bandwidth_hz(ringing, fs) == pytest.approx(1.5, abs=0.1)
+
+
+def test_a_joint_without_gravity_whose_transmission_error_reverses_the_deflections_first_slope_is_identified():
+    """Without gravity the first stiffness of output error's start rests on the Coulomb column
+    alone, which a transmission error's 1 mrad swings reversed (1/k = -4.9e-4 rad/(N m)): a
+    30 s version of hinge grid seed 38000, case 005 (a "vertical" light joint) stopped with "k:
+    expected a positive stiffness", and `mocapfj discover` without a model file with it. The
+    deflection's slope on the whole torque is then the start: identified, k is within 30 % of
+    the truth (4212 for 5540 when written; the transmission error, not modelled here, is what
+    discovery names)."""
+    from mocapfj.ident.joint import identify_signals
+    from mocapfj.synth.hinge import HingeCase, simulate_hinge
+
+    case = HingeCase(
+        name="vertical_te", seed=159735536, family="vertical", I=0.33907850604033485, J=0.17255066402184802,
+        mglx=0.0, mgly=0.0, b=0.998499704390146, c=0.5839200087745845, v=0.5901669899591553, k=5540.438715268298,
+        gear_ratio=120.0, friction_law="tanh", eps_rad_s=0.005197946589337662, sim_smoothing_rad_s=1e-05,
+        f0_hz=0.17978478890593036,
+        amplitudes_rad=(0.15297036744318035, 0.09745541511629487, 0.04403853226851145, 0.0323685489901282,
+                        0.04577841150449904),
+        phases_rad=(3.654771002762147, 3.535457155350577, 0.6099495738195148, 0.11234767542691353,
+                    0.19170110771493548),
+        peak_rad=0.3073132019474947, n_harmonics=5, q0_rad=0.35517622988694436, duration_s=30.0,
+        ramp_s=1.2347404773834691, kp=10485.910332163503, kd=133.6336236985287, mocap_hz=250.0, controller_hz=1000.0,
+        marker_noise_m=0.0003498819920500008, dropout_fraction=0.02338664673494492,
+        dropout_burst_frames=7.831720807190056, torque_noise_Nm=0.03616144002431345, torque_noise_kind="quantised",
+        torque_corr_time_s=0.0, torque_quantum_Nm=0.09357431362737456, motor_noise_rad=0.0, resolver_bits=18,
+        marker_radii_m=(0.14713563952409117, 0.15285505093886223, 0.05717119411030754),
+        marker_heights_m=(0.03774426740506818, -0.02430086431055907, -0.020282445246476218),
+        marker_azimuths_rad=(3.5715452191639203, 5.837671689057781, 8.032782803569653),
+        axis=(0.36600846197697423, 0.32401367480911863, -0.872383484654507),
+        point_m=(1.6425054316261678, 0.5793881680027969, -0.6938927258025418), mocap_zero_rad=-0.6037757559476096,
+        sim_max_step_s=None, sim_rtol=1e-08, spring="linear", spring_params=(),
+        te_amplitudes_rad=(0.0009458308676769602, 0.0010394220473677702),
+        te_phases_rad=(5.322595750060128, 4.820024952594175), te_orders=(1.0, 2.0))
+    s = mocapfj.signals(simulate_hinge(case)[0])["j1"]
+    r = identify_signals(s, gear_ratio=case.gear_ratio, spring_models=("linear",))
+    assert abs(r.model.spring.k / case.k - 1.0) < 0.3, r.model.spring.k
