@@ -43,7 +43,7 @@ from .context import ROBOT_KEY, robot_context, robot_of
 from .model import simulate_joint
 from .reident import REID_EFFECTS, robot_reidentified, train_context, train_part
 from .refit import refit
-from .tournament import LOSS_SDS, TIE_SDS, Judge, chain, joint, pool, score_dict, split_pair, split_parts
+from .tournament import LOSS_SDS, TIE_SDS, Judge, chain, form_sds, joint, pool, score_dict, split_pair, split_parts
 from .residuals import Families, families
 
 __all__ = ["Discovery", "discover", "reidentification_ahead", "locate", "effective_n", "GAP_POINTS", "GAIN_MIN_POINTS"]
@@ -687,6 +687,19 @@ def _pair_sds(judge, jn, first: dict, second: dict, a, b, base) -> None:
         return
     for f, sds in zip((first, second), split_pair(*judge.parameter_sds(jn, pj, base))):
         _with_sds(f["score"], *sds)
+
+
+def _sds_out(score: dict) -> dict:
+    """An effect's reported parameter SDs: those of its fit, widened by the spread between forms the
+    recordings do not tell apart (:func:`.tournament.form_sds`; `sds_include_form_spread` then
+    gives that spread)."""
+    sds = score.get("parameter_sds")
+    if not sds:
+        return {}
+    spread = {k: v for k, v in (score.get("form_spread") or {}).items() if k in sds}
+    if not spread:
+        return {"parameter_sds": sds}
+    return {"parameter_sds": form_sds(sds, spread), "sds_include_form_spread": spread}
 
 
 def _with_sds(score: dict, sds: dict, undetermined: dict) -> None:
@@ -1399,6 +1412,7 @@ def _discover(signals: dict, models: dict, ahead, *, parallel: bool = True, fs_h
                 _pair_sds(judge, jn, prev, {"score": score}, prev["candidate"], cand, prev["before"])
             if win.forms:                   # the whole trial's refit keeps the form (rebuild holds it)
                 score["not_determined"] = {**score.get("not_determined", {}), **win.forms}
+                score["form_spread"] = win.form_spread
             current[jn] = augmented
             found.append({"name": cand.name, "joint": jn, "candidate": cand, "score": score, "model": augmented,
                           "p_value": min(1.0, 2.0 * min(win.score["p_value"] * n_tests, p_oe)),
@@ -1564,8 +1578,9 @@ def _discover(signals: dict, models: dict, ahead, *, parallel: bool = True, fs_h
                                                                        "or_model_file_change")
                                             if k in f["score"]}},
                             "parameters": c.params,
-                            **{k: f["score"][k] for k in ("parameter_sds", "not_determined", "nominal_refitted",
+                            **{k: f["score"][k] for k in ("not_determined", "nominal_refitted",
                                                           "sds_with_nominal_free") if k in f["score"]},
+                            **_sds_out(f["score"]),
                             "p_value": f["p_value"], "fit_gain_pct": f.get("fit_gain_pct"), "runner_up": f["runner_up"],
                             **({"confirmed_by_reidentification": f["confirmed"]} if "confirmed" in f else {})})
     remaining = {jn: _remaining(fams[jn], signals[jn]) for jn in names}

@@ -31,7 +31,7 @@ from .evidence import Evidence
 from .refit import refit
 from .reident import segment
 
-__all__ = ["Judged", "Judge", "chain", "pool", "score_dict", "split_pair", "split_parts", "CONFIRM_SDS", "POOL_SIZE", "LOSS_SDS", "TIE_SDS"]
+__all__ = ["Judged", "Judge", "chain", "form_sds", "pool", "score_dict", "split_pair", "split_parts", "CONFIRM_SDS", "POOL_SIZE", "LOSS_SDS", "TIE_SDS"]
 
 POOL_SIZE = 5
 """Candidates judged by output error per search step (the equation error's lowest criteria)."""
@@ -75,7 +75,9 @@ class Judged:
     stiffness refitted fits as well (:meth:`Judge._beyond_stiffness`; what
     `indistinguishable_from` reports of it), None when it does not or was not tried; `with_nominal`:
     the candidate refitted with the nominal model's own parameters (:func:`chain`), when it was
-    admitted so (:meth:`Judge.judge_with_nominal`), `reason_held` then why it was not with them held."""
+    admitted so (:meth:`Judge.judge_with_nominal`), `reason_held` then why it was not with them held;
+    `form_spread`: {parameter: the other form's value less this one's} when `forms` has a form
+    the recordings do not decide (:func:`form_sds`)."""
 
     joint: str
     candidate: Candidate
@@ -92,6 +94,7 @@ class Judged:
     sd: float = math.nan
     admissible: bool = False
     reason: str = ""
+    form_spread: dict = field(default_factory=dict, repr=False)
     by_stiffness: dict | None = None
     with_nominal: object = field(default=None, repr=False)
     reason_held: str = ""
@@ -228,16 +231,16 @@ class Judge:
                             seen.add(s.params.get(key))
             fits = [refit(s, current, head) for s in starts]
             c = max(fits, key=lambda x: (x[2] if math.isfinite(x[2]) else -math.inf))[0]
-            forms = _forms(head, fits, c, current)
+            forms, spread = _forms(head, fits, c, current)
         else:
-            forms = {}
+            forms, spread = {}, {}
         try:
             model = c.apply(current)
         except InputError as e:
             return Judged(jn, c, score, None, reason=f"its fit is not physical ({e.field} = {e.got}, expected "
                                                         f"{e.expected}): the residual it followed is left as found")
         j = self._assess(jn, c, score, model, current, n_tests)
-        j.forms = forms
+        j.forms, j.form_spread = forms, spread
         if j.admissible or prior is None or c.rebuild is None:
             return self._beyond_stiffness(j, current)
         pc, pbase = prior
@@ -372,7 +375,7 @@ class Judge:
             j2.gains = {n: (j2.scores[n].fit - base[n].fit, sd) for n, (_, sd) in j2.gains.items()}
             j2.gain = sum(g for g, _ in j2.gains.values())
         j2.with_nominal, j2.reason_held = pr, j.reason
-        j2.forms = j.forms
+        j2.forms, j2.form_spread = j.forms, j.form_spread
         return j2
 
     def _assess(self, jn: str, c: Candidate, score: dict, model, current, n_tests: int) -> Judged:
@@ -780,13 +783,14 @@ def score_dict(j: Judged) -> dict:
             **({"whole_evidence_z": j.z_whole} if math.isfinite(j.z_whole) else {})}
 
 
-def _forms(head: Evidence, fits: list, c: Candidate, current) -> dict:
-    """{form parameter: why} when a refitted start of another form (FORM_KEYS) fits the trial's
-    first part within TIE_SDS noise SDs of the difference of the chosen one: the recordings do not
-    tell the forms apart, and the chosen one's parameters hold given its form. On a heavy joint an
-    exponential Stribeck law (218 N m at 0.053 rad/s) fits as well as the planted Gaussian one
-    (140 N m at 0.081 rad/s; hinge grid seed 25000, case 005)."""
-    out = {}
+def _forms(head: Evidence, fits: list, c: Candidate, current) -> tuple[dict, dict]:
+    """({form parameter: why}, {parameter: the other form's value less the chosen one's}) when a
+    refitted start of another form (FORM_KEYS) fits the trial's first part within TIE_SDS noise
+    SDs of the difference of the chosen one: the recordings do not tell the forms apart. On a
+    heavy joint an exponential Stribeck law (218 N m at 0.053 rad/s) fits as well as the planted
+    Gaussian one (140 N m at 0.081 rad/s; hinge grid seed 25000, case 005). The chosen form's
+    other parameters are then uncertain by the spread between the forms too (:func:`form_sds`)."""
+    out, spread = {}, {}
     for key in FORM_KEYS:
         mine = c.params.get(key)
         other = [x for x in fits if x[0].params.get(key, mine) != mine and math.isfinite(x[2])]
@@ -800,8 +804,24 @@ def _forms(head: Evidence, fits: list, c: Candidate, current) -> dict:
         d, sd = b.fit - a.fit, head.change_sd(a, b)
         if math.isfinite(sd) and d <= TIE_SDS * sd:
             out[key] = (f"{key} {alt.params[key]:g} fits the trial's first part {d:.2f} points below {key} "
-                        f"{mine:g} (noise SD {sd:.2f}): the recordings do not tell them apart, and the other "
-                        "parameters hold for this form")
+                        f"{mine:g} (noise SD {sd:.2f}): the recordings do not tell them apart; the other "
+                        "parameters' SDs include the spread between the forms")
+            a, b = _numbers(alt.params), _numbers(c.params)
+            spread.update({k: float(a[k] - b[k]) for k in a if k in b and k not in FORM_KEYS and a[k] != b[k]})
+    return out, spread
+
+
+def form_sds(sds: dict, spread: dict) -> dict:
+    """SDs ({parameter: SD}, a list for a list-valued parameter) widened by the spread between two
+    forms the recordings do not tell apart (:func:`_forms`): either form is as likely, so the
+    chosen one's value is off by the spread d half the time, and its SD is sqrt(SD^2 + d^2 / 2), the
+    root mean square of that mixture about it. With the SD of the form it assumes alone, a
+    Stribeck excess fitted with the other form than the planted one was off by 9.5 and 5.3 of its
+    SDs (hinge grid seed 39000, cases 000 and 003, the true nominal given)."""
+    out = dict(sds)
+    for k, d in spread.items():
+        if k in out and not isinstance(out[k], list):
+            out[k] = float(math.sqrt(out[k] ** 2 + d ** 2 / 2.0))
     return out
 
 
