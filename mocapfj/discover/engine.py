@@ -1016,7 +1016,7 @@ def _nominal_changes(p0: dict, p1: dict, std: dict, used_only: bool = False) -> 
 
 
 def _reidentification(jn, s, nominal, current, found, rejected, held_out, on_valid, holdout, others_trial,
-                      ahead=None, made=None) -> dict:
+                      ahead=None, made=None, from_file: bool = False) -> dict:
     """The re-identification of joint jn (:mod:`.reident`) judged on the held-out evidence (the
     validation recording, else the trial's last `holdout` part, the identification then made on
     the rest); updates `current`, `found`, `rejected` and the held-out chain. Returns the report
@@ -1027,6 +1027,9 @@ def _reidentification(jn, s, nominal, current, found, rejected, held_out, on_val
       SD of that change the recording's noise gives, and beat the model the search found. The
       search's effects that the re-identified one replaces (the same name, a spring or a clock
       of its own) are rejected; the others are kept if they still raise the held-out fit on it.
+      With a model file (`from_file`), a re-identification that names only what the search named
+      must beat it by TIE_SDS noise SDs of their difference: the file's parameters are evidence,
+      and a tie goes to the effects fitted on them.
     - Otherwise the search's effects stand unless the re-identified model without any fits the
       held-out evidence better by more than GAIN_SDS x the SD of the difference (then they followed
       the nominal model's error; a tie goes to the effect, which moves fewer parameters); a nominal model with no effect found is replaced by the re-identified one when that
@@ -1080,7 +1083,14 @@ def _reidentification(jn, s, nominal, current, found, rejected, held_out, on_val
             gain, sd = oe_mod.fit - oe_base.fit, oe_base.change_sd(oe_mod)
             report.update(fit_with_effects=oe_mod.fit, gain=gain, gain_sd=sd)
             names_r = {e["name"] for e in R.effects}
-            if gain > max(GAIN_MIN_POINTS, GAIN_SDS * sd) and oe_mod.fit > oe_cur.fit:
+            beats = oe_mod.fit > oe_cur.fit
+            if beats and from_file and mine and names_r <= {f["name"] for f in mine}:
+                # the same effects with the file's parameters moved: a refinement that must show
+                d_sd = oe_cur.change_sd(oe_mod)
+                beats = bool(oe_mod.fit - oe_cur.fit > TIE_SDS * d_sd)
+                report["same_effects_tie"] = {"difference_points": oe_mod.fit - oe_cur.fit, "sd_points": d_sd,
+                                              "kept": "re-identification" if beats else "search"}
+            if gain > max(GAIN_MIN_POINTS, GAIN_SDS * sd) and beats:
                 spring_r = bool(names_r & {"stiffening", "hysteresis"})
                 keep, model = [], R.model
                 for f in mine:
@@ -1491,7 +1501,8 @@ def _discover(signals: dict, models: dict, ahead, *, parallel: bool = True, fs_h
         for jn in names:
             reidentified[jn] = _reidentification(jn, signals[jn], nominal[jn], current, found, rejected, held_out,
                                                  validation is not None and jn in validation, holdout,
-                                                 {k: v for k, v in qdd.items() if k != jn}, ahead, made.get(jn))
+                                                 {k: v for k, v in qdd.items() if k != jn}, ahead, made.get(jn),
+                                                 from_file=not nominal_from_trial)
         delay_named = any(f["name"] == "time_delay" for f in found)         # the clock is the recording's
         for r in reidentified.values():
             clock_equivalent(r, delay_named)
