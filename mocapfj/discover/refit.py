@@ -40,7 +40,13 @@ never more than MAX_EVALS_PER_PARAMETER allows (:func:`simulation_budget`): with
 p + 1 simulations, 32 steps' worth. A 40 s recording of a joint without gravity whose spot model
 had a collapsed inertia (0.019 for 0.34 kg m^2, 10 kernel substeps a sample) took 15 minutes to
 discover, its refits with the nominal parameters free running to 1456 simulations each (hinge grid
-seed 38000, case 005, transmission error, no model file)."""
+seed 38000, case 005, transmission error, no model file); with this budget it still takes 8
+minutes of CPU, in the number of its refits rather than their length."""
+
+REACH = 10.0
+"""A refit moves each parameter at most this many of its steps from the equation-error start (a
+stiffness by a factor e, a free play's width by e^5): a stiffness run away by a few hundred times
+makes the kernel take thousands of substeps per sample."""
 
 
 def simulation_budget(p: int) -> int:
@@ -50,10 +56,6 @@ def simulation_budget(p: int) -> int:
 
 class _Spent(Exception):
     """The refit's simulation budget is spent."""
-REACH = 10.0
-"""A refit moves each parameter at most this many of its steps from the equation-error start (a
-stiffness by a factor e, a free play's width by e^5): a stiffness run away by a few hundred times
-makes the kernel take thousands of substeps per sample."""
 
 
 def _model_of(cand: Candidate, theta, model):
