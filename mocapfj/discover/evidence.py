@@ -86,9 +86,10 @@ class Evidence:
         idx = np.flatnonzero(keep)
         return slice(int(idx[0]), int(idx[-1]) + 1)
 
-    def _residuals(self, d_sim: np.ndarray, u_sim: np.ndarray):
-        """(in-band deflection residual centred, in-band torque residual, sd_d, sd_u) or None."""
-        sl = self._span(d_sim)
+    def _residuals(self, d_sim: np.ndarray, u_sim: np.ndarray, sl: slice | None = None):
+        """(in-band deflection residual centred, in-band torque residual, sd_d, sd_u) over `sl`
+        (default: the inner samples the simulation covers), or None."""
+        sl = self._span(d_sim) if sl is None else sl
         if sl is None:
             return None
         yd, yu, sd_d, sd_u = self._recorded(sl)

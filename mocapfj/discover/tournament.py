@@ -506,18 +506,20 @@ class Judge:
             return {}, {}
         idx = np.flatnonzero(keep)
         sl = slice(int(idx[0]), int(idx[-1]) + 1)
-        yd, yu, sd_d, sd_u = ev._recorded(sl)
+        res = ev._residuals(*preds[0], sl)
+        if res is None:
+            return {}, {}
+        rd, ru, sd_d, sd_u = res
         g = noise_gain(ev.fs, ev.band_hz)
         n = sl.stop - sl.start
         H = np.zeros((th.size, th.size))
         M = np.zeros_like(H)
-        for ch, y, sd_y, sigma, centre in ((0, yd, sd_d, ev.noise_delta, True), (1, yu, sd_u, ev.noise_u, False)):
+        for ch, r, sd_y, sigma, centre in ((0, rd, sd_d, ev.noise_delta, True), (1, ru, sd_u, ev.noise_u, False)):
             if not (sd_y > 0 and np.isfinite(sigma)):
                 continue
             # a channel the model misses by more than its noise: what it leaves is error the
             # parameters' SDs must carry too (docstring)
-            r = y - in_band(np.nan_to_num(preds[0][ch][sl]), ev.fs, ev.band_hz)
-            rms = float(np.std(r)) if centre else float(np.sqrt(np.mean(r ** 2)))
+            rms = float(np.sqrt(np.mean(r ** 2)))
             sigma = max(sigma, rms) if np.isfinite(rms) else sigma
             cols = []
             for i in range(th.size):
