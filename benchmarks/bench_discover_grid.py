@@ -308,6 +308,7 @@ def run_case(args) -> dict:
                    v_true=tv["fit"], v_floor=tv["floor"], delay_planted_s=delay,
                    params=r["effects"][0]["parameters"] if r["effects"] else {},
                    param_sds=r["effects"][0].get("parameter_sds", {}) if r["effects"] else {},
+                   not_determined=sorted((r["effects"][0].get("not_determined") or {}) if r["effects"] else {}),
                    size=_size(kind, planted, delay))
     except Exception as e:                                     # a failure is a result of the grid
         out["error"] = f"{type(e).__name__}: {e}"
@@ -416,10 +417,17 @@ def summarize(rows: list[dict]) -> list[str]:
                                  f"{VISIBLE_SDS:g} noise SDs above the nominal on it): at least half in "
                                  f"{sum(x >= 0.5 for x in shown)}/{len(shown)}; the others (gain points, gap SDs): "
                                  + ", ".join(f"{g:+.2f} ({z:.1f})" for g, z in hidden))
-        zs = [z for r in ok if r["named"] and r["named"][0] == kind for z in _param_zs(kind, r)]
+        key = {"transmission_error": "amplitudes_rad", "stribeck": "fs", "backlash": "gap_rad",
+               "hysteresis": "alpha", "friction_asymmetry": "c_pos"}.get(kind)
+        zs = [(z, key in (r.get("not_determined") or ())) for r in ok if r["named"] and r["named"][0] == kind
+              for z in _param_zs(kind, r)]
         if zs and kind != "time_delay":
-            lines.append(f"  {_PARAM_NAMES[kind]} error / its SD: " + ", ".join(f"{z:+.2f}" for z in zs)
-                         + f"; RMS {math.sqrt(np.mean(np.square(zs))):.2f}")
+            # * marks an effect whose parameters discovery reports as not determined
+            told = [z for z, u in zs if not u]
+            lines.append(f"  {_PARAM_NAMES[kind]} error / its SD: " + ", ".join(f"{z:+.2f}{'*' if u else ''}" for z, u in zs)
+                         + f"; RMS {math.sqrt(np.mean(np.square([z for z, _ in zs]))):.2f}"
+                         + (f", {math.sqrt(np.mean(np.square(told))):.2f} without the * (not determined)"
+                            if len(told) < len(zs) and told else ""))
         alias = [r for r in ok if r.get("clock_or_viscous_s") is not None]
         if alias:
             lines.append(f"  a clock offset or the viscous split reported (not named) in {len(alias)}/{len(ok)}"
