@@ -26,7 +26,7 @@ from ..errors import InputError
 from ..ident.conditioning import noise_gain
 from .compare import in_band
 from ..dynamics import LinearSpring
-from .effects import FITTERS, OWN_STIFFNESS, Candidate, nominal_parameters, stiffness_change
+from .effects import FITTERS, OWN_STIFFNESS, Candidate, nominal_parameters, refittable, stiffness_change
 from .evidence import Evidence
 from .refit import refit
 from .reident import segment
@@ -695,9 +695,10 @@ class Judge:
         return best
 
     def finalize(self, j: Judged, fams, qdd, current):
-        """The chosen candidate fitted on the whole trial (equation error for an effect output error
-        does not refit, then output error for one it does, from the first part's fit): (candidate,
-        augmented model); the first part's fit when the whole trial's is not physical."""
+        """The chosen candidate fitted on the whole trial (output error from the first part's fit;
+        for an effect the search keeps at its equation-error fit, that fit on the whole trial and
+        then output error from it, :func:`.effects.refittable`): (candidate, augmented model); the
+        first part's fit when the whole trial's is not physical."""
         jn, c = j.joint, j.candidate
         if j.with_nominal is not None:
             # refitted with the nominal parameters: the joint refit on the whole trial
@@ -714,6 +715,14 @@ class Judge:
         else:
             fam = fams[jn]
             c2 = FITTERS[c.name](fam, fam.residual(c.family)[1], {k: v for k, v in qdd.items() if k != jn})
+            if c2 is not None and c2.later is not None:
+                # kept at its equation-error fit in the search; found, refitted like the others
+                # (effects.refittable)
+                try:
+                    c2 = refit(refittable(c2), current[jn], self.evidence(jn, "trial"))[0]
+                except (InputError, RuntimeError, ArithmeticError):
+                    c2 = refittable(c2)
+            c = refittable(c)
         for cc in ((c2, c) if c2 is not None else (c,)):
             try:
                 return cc, cc.apply(current[jn])
