@@ -14,8 +14,14 @@ Verlet with the friction law set-valued, module docstring of :mod:`.link_respons
   angle, sum a_k cos(n_k q + phi_k) on both directions (:class:`.PositionDependent` over one of
   those, the ripple taken at each substep's mid angle). Under the sign law the link sticks while the
   net torque is below the breakaway level c + s of the direction it would move in; while it
-  slides, the Stribeck excess is taken at the substep's starting speed (first order in it, exact
-  in the rest);
+  slides, the Stribeck excess is taken at the substep's mid speed (implicit midpoint, Newton from
+  the explicit step). Taken at the starting speed, the scheme was first order in it: on a joint
+  with twice its Coulomb level at rest and vs 0.04 rad/s (hinge grid seed 42000, case 001), the
+  link driven by the true motor angle ended its stuck phases up to 0.89 mrad from the recording
+  simulator's (110 urad RMS over 24 s; 891 and 398 urad at 4 and 20 x the substeps), so that the
+  true model fitted its trial 14.7 noise SDs worse than the model without the Stribeck friction;
+  at mid speed, 16 urad RMS (140 at most), and the scheme agrees with itself at 20 x the
+  substeps to 8.6 urad;
 - springs: linear with offset, cubic, three-piece (:class:`.PiecewiseSpring`), Bouc-Wen with
   n = 1 (:class:`.BoucWen`), each optionally behind free play (:class:`.Backlash`). The Bouc-Wen
   state is advanced exactly along the deflection's path between substep midpoints (the state
@@ -255,7 +261,27 @@ def _run_py(q_m, qd_m, dt, n_sub, I, mglx, mgly, fr, kind, P, gap, N, amps, phas
                 j = 0 if w > 0.0 else 1
                 C = fr[j] + rp + fr[4 + j] * math.exp(-(abs(w) / fr[6 + j]) ** expo)
                 mass = Ii + 0.5 * h * fr[2 + j]
-                w1 = (p - 0.5 * h * fr[2 + j] * w - sg * h * C) / mass
+                rhs = p - 0.5 * h * fr[2 + j] * w
+                w1 = (rhs - sg * h * C) / mass
+                if fr[4 + j] != 0.0 and w1 * sg > 0.0:
+                    # the Stribeck excess at the step's mid speed (implicit midpoint, as the
+                    # smoothed law's): at the starting speed the scheme is first order in it, and
+                    # a breakaway of twice the Coulomb level at 0.04 rad/s stuck the link 0.8 mrad
+                    # away from where it sticks (module docstring)
+                    for _ in range(30):
+                        wm = 0.5 * (w + w1)
+                        if wm * sg <= 0.0:
+                            break
+                        r = (abs(wm) / fr[6 + j]) ** expo
+                        ex = math.exp(-r)
+                        g = mass * w1 - rhs + sg * h * (fr[j] + rp + fr[4 + j] * ex)
+                        dg = mass - 0.5 * h * sg * fr[4 + j] * ex * expo * r / wm
+                        if dg < 0.5 * mass:
+                            dg = 0.5 * mass
+                        dw1 = g / dg
+                        w1 -= dw1
+                        if abs(dw1) <= 1e-12 * (abs(w1) + abs(w)):
+                            break
                 if w1 * sg >= 0.0:               # slides one way all along
                     q = qmid + 0.5 * h * w1
                     w = w1
