@@ -104,3 +104,26 @@ def test_a_stiffness_change_of_a_spot_model_refines_it_and_is_no_missing_physics
                              "k": 5522.6, "k_model": 4780.3, "change_pct": 15.53}}})
     assert d.verdict == ("no missing physics found; the stiffness of the nominal model identified on the trial "
                          "refined on j1 (k 5523 N m/rad, +15.5 %)")
+
+
+def test_a_re_identification_that_drops_an_effect_by_moving_the_file_must_show_it():
+    """With the true nominal as the model file, a light cobot with a stiffening and a 0.058 ms
+    clock offset (hinge grid seed 43000, case 001): the search named both; the re-identification
+    named the stiffening alone, its v -45 % and b +27 % (46 SDs each: v - k dt, b + k dt, the
+    offset's equivalent) and k +18 SDs, and fitted the validation recording 0.033 points better
+    at an SD of 0.015 (2.1 SDs), which beat TIE_SDS and dropped the offset. Dropping an effect by
+    moving the file beyond FILE_MOVE_SDS must beat GAIN_SDS: the search's pair stands. The same
+    difference without a dropped effect, or beyond GAIN_SDS, keeps the re-identification."""
+    from mocapfj.discover.engine import FILE_MOVE_SDS, GAIN_SDS, TIE_SDS, same_effects_tie
+
+    params = {"I": {"sds": -1.67}, "J": {"sds": 1.73}, "b": {"sds": 46.5}, "k": {"sds": 17.9}, "v": {"sds": -45.9},
+              "c": {"sds": -4.88}, "mglx": {"sds": None}}
+    t = same_effects_tie({"stiffening", "time_delay"}, {"stiffening"}, params, 0.0327, 0.0153)
+    assert t["kept"] == "search" and t["dropped"] == ["time_delay"] and set(t["file_moved_sds"]) == {"b", "k", "v"}
+    assert TIE_SDS < 0.0327 / 0.0153 < GAIN_SDS and FILE_MOVE_SDS < 17.9
+    assert same_effects_tie({"stiffening"}, {"stiffening"}, params, 0.0327, 0.0153)["kept"] == "re-identification"
+    assert same_effects_tie({"stiffening", "time_delay"}, {"stiffening"}, params, 0.05, 0.0153)["kept"] == \
+        "re-identification"
+    small = {k: {"sds": 1.0} for k in params}
+    assert same_effects_tie({"stiffening", "time_delay"}, {"stiffening"}, small, 0.0327, 0.0153)["kept"] == \
+        "re-identification"
