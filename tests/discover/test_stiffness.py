@@ -49,3 +49,22 @@ def test_a_direction_the_fit_does_not_move_is_not_given_a_variance():
     M = np.array([[4.0, 0.0], [0.0, 0.0]])
     cov, null = sandwich(H, M)
     assert cov[0, 0] == 1.0 and null.shape == (2, 1) and abs(abs(null[1, 0]) - 1.0) < 1e-12
+
+
+def test_a_three_slope_spring_with_a_soft_first_slope_reads_also_as_free_play():
+    """Free play of 0.078 mrad on a light cobot (hinge grid seed 43000, case 002, the true nominal
+    given) was named a three-slope spring, k1 1192, k2 5063, k3 5031 N m/rad, k1 up to 0.0767 N m:
+    a soft zone of +-0.064 mrad beyond which one stiffness holds, which is free play of
+    2 d1 (1 - k1 / k2) = 0.098 mrad in front of k2 (analytic). A datasheet's K1 < K2 < K3
+    (seed 39000, case 004: k1 0.58 k2, k3 1.33 k2) is not read so."""
+    import numpy as np
+
+    from mocapfj.discover.effects import _soft_zone
+
+    K = np.array([1192.3, 5062.5, 5030.6])
+    soft = _soft_zone(K, 0.0767 / 1192.3)
+    assert soft is not None
+    assert abs(soft["half_width_mrad"] - 0.0643) < 1e-3
+    assert abs(soft["as_free_play_gap_mrad"] - 2 * 0.0643 * (1 - 1192.3 / 5062.5)) < 1e-3
+    assert 0.078 < soft["as_free_play_gap_mrad"] < 0.11
+    assert _soft_zone(np.array([0.58, 1.0, 1.33]) * 5000.0, 7.3e-5) is None
