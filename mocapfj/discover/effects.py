@@ -911,10 +911,22 @@ def position_dependent_friction(fam: Families, mask, others) -> Candidate | None
                     f"misalignment of wave generator and flexspline) load its teeth and bearings unevenly over a turn "
                     f"(Lightcap and Banks (2007) sec. VI).")
         return Candidate("position_dependent_friction", "link", params, 2 * len(chosen) + len(chosen), contribution,
-                         lambda m: m.with_(friction=PositionDependent(m.friction, orders=tuple(chosen),
-                                                                      amplitudes=tuple(amps), phases=tuple(phases))),
-                         loc, explain)
+                         lambda m: _with_ripple(m, chosen, amps, phases), loc, explain)
     return _later(build, c[:-1], steps)
+
+
+def _with_ripple(m, orders, amps, phases):
+    """`m` with a Coulomb ripple over its friction law; InputError when the ripple's amplitudes
+    sum beyond the law's lower Coulomb level (the friction would then drive the joint, and the
+    compiled kernel does not run it: an output-error refit there falls to the general integrator)."""
+    from ..dynamics.link_forward import encode_friction
+
+    a = encode_friction(m.friction)
+    if a is not None and float(np.sum(np.abs(amps))) > min(a[0], a[1]):
+        raise InputError(None, "position_dependent_friction", "a ripple whose amplitudes sum below the Coulomb level "
+                         f"{min(a[0], a[1]):.3g} N m", float(np.sum(np.abs(amps))))
+    return m.with_(friction=PositionDependent(m.friction, orders=tuple(orders), amplitudes=tuple(amps),
+                                              phases=tuple(phases)))
 
 
 def coupling(fam: Families, mask, others) -> Candidate | None:
