@@ -206,16 +206,27 @@ class FlexibleJointModel:
         scale = 1.0 + np.max(np.abs(self.holding_torque(sol.x)))
         if np.max(np.abs(residual(sol.x))) <= 1e-9 * scale:
             return sol.x
-        if self.n_joints == 1:
-            # a spring with a flat stretch (free play) stalls hybr at q = q_m: bracket the one root
-            # instead (the spring torque falls as q rises past q_m; gravity changes slower)
-            f = lambda x: float(residual(np.array([x]))[0])      # noqa: E731
-            h = 1e-4
-            while f(q_m[0] - h) * f(q_m[0] + h) > 0:
-                h *= 2.0
-                if h > 1.0:
-                    raise RuntimeError(f"no static equilibrium found within 1 rad of q_m: {sol.message}")
-            return np.array([brentq(f, q_m[0] - h, q_m[0] + h, xtol=1e-15, rtol=1e-14)])
+        # a spring with a flat stretch (free play) stalls hybr at q = q_m: bracket each joint's root
+        # instead (its spring torque falls as q_j rises past q_m,j; gravity changes slower), the
+        # others held, joint after joint until the torques balance (the joints couple through
+        # gravity, |dG/dq| / k of the springs per sweep: a two-joint arm with free play on its
+        # elbow, hinge grid's two-joint seed 39000, stalled hybr and failed its recording)
+        q = q_m.copy()
+        for _ in range(100):
+            for j in range(self.n_joints):
+                def f(x, j=j):
+                    qq = q.copy()
+                    qq[j] = x
+                    return float(residual(qq)[j])
+                h = 1e-4
+                while f(q_m[j] - h) * f(q_m[j] + h) > 0:
+                    h *= 2.0
+                    if h > 1.0:
+                        raise RuntimeError(f"no static equilibrium found within 1 rad of q_m: {sol.message}")
+                q[j] = brentq(f, q_m[j] - h, q_m[j] + h, xtol=1e-15, rtol=1e-14)
+            scale = 1.0 + np.max(np.abs(self.holding_torque(q)))
+            if np.max(np.abs(residual(q))) <= 1e-9 * scale:
+                return q
         raise RuntimeError(f"no static equilibrium found: {sol.message}")
 
     def static_motor_angle(self, q, z=None) -> np.ndarray:

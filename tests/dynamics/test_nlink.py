@@ -131,3 +131,24 @@ def test_bad_input():
         NLinkModel.from_urdf("/no/such/robot.urdf", motor_inertia=1.0, springs=[LinearSpring(1.0)])
     with pytest.raises(InputError):
         arm().mass_matrix(np.zeros(3))
+
+
+def test_static_equilibrium_with_free_play_on_the_elbow():
+    """PA-10 joints 2 and 3 with 4.54 kg on the wrist and free play of 2 mrad in the elbow's spring
+    (the two-joint grid's seed 39000, case 0, whose recording failed there): root finding on both
+    joints at once stalls on the flat stretch; the joints' roots bracketed one after the other, the
+    others held, give the equilibrium, where the springs carry the gravity and the elbow deflects
+    beyond its half gap."""
+    from mocapfj.dynamics import Backlash
+    from mocapfj.synth.urdf import pa10_urdf
+
+    gap, k2, k3 = 2.0029e-3, 11900.0, 4600.0
+    m = NLinkModel.from_urdf(pa10_urdf([2, 3], joint_names=["j2", "j3"], payload_kg=4.54), motor_inertia=[0.4, 0.1],
+                             springs=[LinearSpring(k2), Backlash(gap, LinearSpring(k3))])
+    q_m = np.array([0.03206678, -0.0987732])
+    q = m.static_link_angle(q_m)
+    d = q_m - q
+    G = m.holding_torque(q)
+    assert k2 * d[0] == pytest.approx(G[0], abs=1e-7)
+    assert abs(d[1]) > gap / 2
+    assert k3 * (d[1] - np.sign(d[1]) * gap / 2) == pytest.approx(G[1], abs=1e-7)
