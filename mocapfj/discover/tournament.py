@@ -21,6 +21,8 @@ import math
 from dataclasses import dataclass, field
 
 import numpy as np
+from scipy.ndimage import uniform_filter1d
+from scipy.signal import welch
 
 from ..errors import InputError
 from ..ident.conditioning import noise_gain
@@ -473,7 +475,8 @@ class Judge:
         w_c = 1 / (2 n sd_c^2), and the noise white over the band at sigma_c^2 / g per sample (the
         low-pass's variance gain g; :func:`.compare.fit_change_sd`), least squares on the weighted
         residual gives theta the covariance H^-1 M H^-1, H = sum_c w_c A_c' A_c and
-        M = sum_c w_c^2 sigma_c^2 / g A_c' A_c (A_c's columns m_ic / h_i); the reported parameters'
+        M = sum_c w_c^2 sigma_c^2 / g A_c' A_c (A_c's columns m_ic / h_i), or more where the residual's
+        spectrum in the band is not white (:func:`score_covariance`); the reported parameters'
         follows through their change with theta. For one parameter this is h SD / (2 G) of the
         fit change's SD and size. Steps are a tenth of the candidate's scales (`steps`). SDs of
         {param: SD} (a list for a list-valued parameter); not determined: {param: why} for a
@@ -531,7 +534,7 @@ class Judge:
             A = np.column_stack(cols)
             w = 1.0 / (2.0 * n * sd_y ** 2)
             H += w * (A.T @ A)
-            M += w ** 2 * sigma ** 2 / g * (A.T @ A)
+            M += w ** 2 * score_covariance(A, r, ev.fs, sigma ** 2 / g)
         cov, null = sandwich(H, M)
         flat = [_flat(c) for c in cands]
         keys = [k for k in flat[0] if all(k in f for f in flat)]
@@ -876,6 +879,47 @@ def _flat(c) -> dict:
     if isinstance(c, _Joint):
         return {f"{i}:{k}": v for i, p in enumerate(c.parts) for k, v in _numbers(p.params).items()}
     return _numbers(c.params)
+
+
+WELCH_S = 2.0
+"""Segment length (s) of the residual's spectrum in :func:`score_covariance`: 0.5 Hz resolution,
+finer than the corner of the coloured noise a drive's torque log carries (an AR(1) of 2-50 ms
+correlation time: 3-80 Hz)."""
+SMOOTH_BINS = 5
+"""...averaged over this many of its bins (2.5 Hz, below those corners): a single bin of a 40 s
+recording's spectrum scatters by 20-40 %, the average by about 10 %."""
+
+
+def score_covariance(A: np.ndarray, r: np.ndarray, fs: float, white_var: float) -> np.ndarray:
+    """The covariance of A' e (p, p) for noise e whose in-band residual is r (n,), A (n, p) the
+    in-band changes of the prediction with the parameters: (1/n) sum_k Re(A_k^* A_k') P(f_k) over
+    the DFT bins, P the residual's spectral density per sample (Welch, WELCH_S segments,
+    SMOOTH_BINS averaged), at least `white_var` (the noise's, white; sigma^2 / g). For white noise this is white_var A'A (within
+    the spectrum's scatter above that floor, up to 30 %). Noise that is not white in the band, a
+    drive's torque log (AR(1), 2-50 ms) or markers smoothed by the mocap vendor's software, has its
+    density highest at the low frequencies the excitation and the parameters' changes occupy; taken
+    as white, the covariance was 20-80 times short for AR(1) noise of 10-40 ms
+    (tests/discover/test_score_covariance.py). On the hinge grid the effects' parameters draw on
+    the deflection, whose noise is white there (a cobot's hysteresis: H 0.95 from the deflection,
+    2e-4 from the torque), and the SDs moved 3-15 % (seed 43000, cases 002-003). The residual's
+    spectrum carries the model's misfit too, where it lies.
+    """
+    n = A.shape[0]
+    nper = int(min(n, round(WELCH_S * fs)))
+    if nper < 16 or not np.isfinite(r).all():
+        return white_var * (A.T @ A)
+    f, s = welch(r, fs=fs, nperseg=nper, detrend=False)
+    s[0] *= 2.0                            # one-sided: the zero frequency's density is not doubled
+    s = uniform_filter1d(s, SMOOTH_BINS, mode="mirror")
+    fk = np.fft.rfftfreq(n, 1.0 / fs)
+    per_sample = np.maximum(np.interp(fk, f, s) * fs / 2.0, white_var)
+    Ak = np.fft.rfft(A, axis=0)
+    wk = np.full(fk.size, 2.0)
+    wk[0] = 1.0
+    if n % 2 == 0:
+        wk[-1] = 1.0
+    C = (Ak.conj() * (wk * per_sample)[:, None]).T @ Ak
+    return np.real(C) / n
 
 
 def sandwich(H: np.ndarray, M: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
