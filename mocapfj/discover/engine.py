@@ -1407,6 +1407,9 @@ def _discover(signals: dict, models: dict, ahead, *, parallel: bool = True, fs_h
                 break
             judged = [judge.judge(jn, c, sc, current[jn], n_tests, prior=_prior(found, jn)) for jn, c, sc in cands]
             judged += _stiffness_judged(judge, judged, fams, current, holdout, n_tests, found)
+            # the close contenders refitted with the joint's first effect, which holds part of them
+            judged = judge.with_prior(judged, current, {jn: _prior(found, jn) for jn in names
+                                                        if _prior(found, jn) is not None}, n_tests)
             # the nominal model identified on this trial: the leaders not admitted with its parameters
             # held, ranked above every admitted one, judged with them free
             judged = judge.with_nominal(judged, current, n_tests)

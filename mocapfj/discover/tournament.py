@@ -248,24 +248,63 @@ class Judge:
         j.forms, j.form_spread = forms, spread
         if j.admissible or prior is None or c.rebuild is None:
             return self._beyond_stiffness(j, current)
+        j2 = self._with_prior(jn, c, score, current, n_tests, prior)
+        if j2 is None or not j2.admissible:
+            return j
+        return self._beyond_stiffness(j2, current)
+
+    def _with_prior(self, jn: str, c: Candidate, score: dict, current, n_tests: int, prior) -> Judged | None:
+        """Candidate c refitted on the trial's first part together with the joint's effect found
+        before (`prior`: that candidate, the model it was added to) and judged against the best of
+        the current model, that effect refitted alone, and that effect as the pair refitted it
+        (:meth:`judge`); the Judged carries the pair in `together`. None when the pair cannot be
+        formed or fitted."""
         pc, pbase = prior
         pj = joint(pc, c, pbase)
         if pj is None:
-            return j
+            return None
         try:
-            pr = refit(pj, pbase, head)[0]
-            # against the best of: the current model, pc refitted alone, and pc as the pair refitted it
+            pr = refit(pj, pbase, self.evidence(jn, "head"))[0]
             ref = [self._alone(jn, pc, pbase, current), pr.parts[0].apply(pbase)]
             sc = [self.base(jn, current)] + [{ev.name: ev.score(m) for ev in self.held_out(jn)} for m in ref]
             tot = [sum(v[ev.name].fit for ev in self.held_out(jn)) for v in sc]
             alone = [current, *ref][int(np.nanargmax(tot))]
             j2 = self._assess(jn, pr.parts[1], score, pr.apply(pbase), alone, n_tests)
         except (InputError, RuntimeError, ArithmeticError):
-            return j
-        if not j2.admissible:
-            return j
+            return None
         j2.together = pr
-        return self._beyond_stiffness(j2, current)
+        return j2
+
+    def with_prior(self, judged: list, currents: dict, priors: dict, n_tests: int) -> list:
+        """`judged` with each admissible candidate that gained at least REVISIT_SHARE of the
+        best admissible gain on its joint judged again refitted together with the joint's effect
+        found before (`priors`: {joint: (that candidate, the model it was added to)} where output
+        error can refit it; :meth:`_with_prior`), and replaced by that judgement when it is
+        admissible and gains more. The first effect was fitted without the second and holds part
+        of it: on a light cobot with a cubic spring and a -0.485 ms clock offset, the offset was
+        found first at -0.440 ms; with it held the cubic spring gained 2.74 points and a
+        hysteresis 3.59, and the hysteresis was named, 1.5 points short of the truth on the
+        validation recording; refitted together the spring gains 7.02 (the offset -0.491 ms), the
+        hysteresis 5.21 (fresh hinge grid seed 44000, case 001, two effects). `currents`:
+        {joint: the current model}."""
+        best = {}
+        for j in judged:
+            if j.admissible:
+                best[j.joint] = max(best.get(j.joint, -math.inf), j.gain)
+        out = []
+        for j in judged:
+            prior = priors.get(j.joint)
+            if (prior is None or not j.admissible or j.together is not None or j.with_nominal is not None
+                    or j.model is None or j.candidate.rebuild is None or not j.gain >= REVISIT_SHARE * best[j.joint]):
+                out.append(j)
+                continue
+            j2 = self._with_prior(j.joint, j.candidate, j.score, currents[j.joint], n_tests, prior)
+            if j2 is not None and j2.admissible and j2.gain > j.gain:
+                j2.forms, j2.form_spread, j2.by_stiffness = j.forms, j.form_spread, j.by_stiffness
+                out.append(j2)
+            else:
+                out.append(j)
+        return out
 
     def _beyond_stiffness(self, j: Judged, current) -> Judged:
         """`j`, not admissible when its effect carries a stiffness of its own (OWN_STIFFNESS) and
