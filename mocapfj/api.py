@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import os
 from collections.abc import Sequence
+from dataclasses import replace
 
 import numpy as np
 
@@ -60,6 +61,7 @@ def signals(rec: RecordingLike, calibration=None) -> dict[str, JointSignals]:
     span all joints share: {joint: JointSignals}. `calibration`: a JointsResult of `rec` (computed
     when not given)."""
     from .ident.conditioning import joint_signals
+    from .joints.smoothing import smoothing_corner_hz
 
     rec = _recording(rec)
     cal = joints(rec) if calibration is None else calibration
@@ -68,7 +70,8 @@ def signals(rec: RecordingLike, calibration=None) -> dict[str, JointSignals]:
         if j.deflection is None:
             raise InputError(rec.root, f"joints[{j.name}]", "a controller log with the joint's motor columns",
                              "markers only", hint="identification needs the motor angle and torque")
-        out[j.name] = joint_signals(j.deflection, rec.controller, j.name, source=rec.root)
+        out[j.name] = replace(joint_signals(j.deflection, rec.controller, j.name, source=rec.root),
+                              smoothing_hz=smoothing_corner_hz(j.angles))
     n = min(s.n_samples for s in out.values())
     return {k: s.head(n) for k, s in out.items()}
 

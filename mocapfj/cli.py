@@ -340,8 +340,10 @@ def _cmd_discover(args) -> int:
                 lines.append(f"    {name} not determined: {why}")
         for j in s["fit_before"]:
             f = s["fits"][j]["after"]
+            smoothed = (f"; markers smoothed before export, corner about {f['markers_smoothed_hz']:.3g} Hz"
+                        if f.get("markers_smoothed_hz") else "")
             line = (f"  {j}: fit {s['fit_before'][j]:.2f} % -> {s['fit_after'][j]:.2f} % (noise floor {f['floor']:.2f} %, "
-                    f"below {f['band_hz']:.3g} Hz)")
+                    f"below {f['band_hz']:.3g} Hz{smoothed})")
             if s["validation"] and j in s["validation"]["fit_before"]:
                 v = s["validation"]
                 line += (f"; validation {v['fit_before'][j]:.2f} % -> {v['fit_after'][j]:.2f} % "

@@ -721,6 +721,11 @@ class JointSignals:
         clock, rad, N m, link side), unfiltered: output-error identification compares the torque
         at this rate. None when only the mocap-clock signals are known.
     fs_c_hz : float or None
+    smoothing_hz : float or None
+        The corner of a low-pass the markers went through before export (the mocap software's
+        smoothing), Hz, as their residuals show it (:func:`mocapfj.joints.smoothing.smoothing_corner_hz`);
+        None when they were not smoothed or it is not known. The link angle carries nothing of the
+        joint above it.
     """
 
     t: np.ndarray
@@ -735,6 +740,7 @@ class JointSignals:
     q_m_c: np.ndarray | None = None
     u_c: np.ndarray | None = None
     fs_c_hz: float | None = None
+    smoothing_hz: float | None = None
 
     def __post_init__(self) -> None:
         dims = {}
@@ -759,6 +765,8 @@ class JointSignals:
                 object.__setattr__(self, name, freeze(check_array(getattr(self, name), f"{self.name or 'signals'}: {name}",
                                                                   ("T_c",), dims=cdims, finite=True)))
             object.__setattr__(self, "fs_c_hz", check_scalar(self.fs_c_hz, "fs_c_hz", positive=True))
+        if self.smoothing_hz is not None:
+            object.__setattr__(self, "smoothing_hz", check_scalar(self.smoothing_hz, "smoothing_hz", positive=True))
 
     @property
     def has_controller_rate(self) -> bool:
@@ -784,4 +792,4 @@ class JointSignals:
             ctrl = dict(t_c=self.t_c[keep], q_m_c=self.q_m_c[keep], u_c=self.u_c[keep], fs_c_hz=self.fs_c_hz)
         return JointSignals(self.t[:n], self.q[:n], self.q_m[:n], self.u[:n], self.fs_hz,
                             int(self.n_filled if self.filled is None else self.filled[:n].sum()), self.name,
-                            None if self.filled is None else self.filled[:n], **ctrl)
+                            None if self.filled is None else self.filled[:n], **ctrl, smoothing_hz=self.smoothing_hz)

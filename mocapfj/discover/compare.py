@@ -45,7 +45,7 @@ import numpy as np
 from ..ident.conditioning import lowpass, noise_floor_sd, noise_gain
 from .memo import by_content
 
-__all__ = ["BAND_FRACTION", "MIN_BAND_HZ", "MIN_PERIOD_CORR", "comparison_band_hz", "excitation_period_s",
+__all__ = ["SMOOTHED_WHITE", "BAND_FRACTION", "MIN_BAND_HZ", "MIN_PERIOD_CORR", "comparison_band_hz", "excitation_period_s",
            "Channel", "compare_channel", "in_band", "combined_fit", "combined_floor_sd", "WHITE_BAND", "fit_change_sd"]
 
 BAND_FRACTION = 0.6
@@ -61,10 +61,18 @@ MIN_PERIOD_CORR = 0.95
 """The motor angle is periodic when its normalised autocorrelation reaches this at some lag."""
 
 
+SMOOTHED_WHITE = (0.5, 0.9)
+"""Where a recording whose markers were smoothed before export has its deflection's white floor
+read: this share of the smoothing's corner (above it the noise is gone; a light cobot's trial
+smoothed at 6 Hz read its floor at 1.3 % of the in-band noise over WHITE_BAND, and a clock offset
+of 0.03 ms was named on its control)."""
+
+
 @by_content()
-def _white_sd(x: np.ndarray, fs_hz: float) -> float:
-    """The recorded signal's white floor over WHITE_BAND (the recording's alone: kept, :mod:`.memo`)."""
-    return noise_floor_sd(x, fs_hz, *WHITE_BAND)
+def _white_sd(x: np.ndarray, fs_hz: float, above: float = WHITE_BAND[0], below: float = WHITE_BAND[1]) -> float:
+    """The recorded signal's white floor over WHITE_BAND, or over (above, below) x fs (the
+    recording's alone: kept, :mod:`.memo`)."""
+    return noise_floor_sd(x, fs_hz, above, below)
 
 
 @by_content(64)
@@ -208,7 +216,7 @@ def in_band(x: np.ndarray, fs_hz: float, band_hz: float) -> np.ndarray:
 
 def compare_channel(y: np.ndarray, y_hat: np.ndarray, raw: np.ndarray | None, fs_hz: float, band_hz: float,
                     keep: np.ndarray, period_s: float | None, center: bool = False,
-                    bounded: bool = False) -> Channel:
+                    bounded: bool = False, white_hz: tuple[float, float] | None = None) -> Channel:
     """A channel's in-band fit and noise floor (module docstring).
 
     y, y_hat : (T,) recorded and predicted (NaN allowed outside `keep`); raw : (T,) the recorded
@@ -216,7 +224,9 @@ def compare_channel(y: np.ndarray, y_hat: np.ndarray, raw: np.ndarray | None, fs
     the floor from below when there is one (None: only when there is no period); keep : (T,) bool,
     the samples compared (a contiguous run); center : compare y - y_hat less its mean (a constant
     the recording cannot fix); bounded : the white floor bounds the period estimate from below
-    (a logged torque: a drive's quantised current repeats with the motion).
+    (a logged torque: a drive's quantised current repeats with the motion); white_hz : (lo, hi) Hz
+    to read the white floor in instead of WHITE_BAND (a recording smoothed before export:
+    SMOOTHED_WHITE of its corner).
     """
     idx = np.flatnonzero(keep)
     sl = slice(int(idx[0]), int(idx[-1]) + 1)
@@ -237,7 +247,8 @@ def compare_channel(y: np.ndarray, y_hat: np.ndarray, raw: np.ndarray | None, fs
     if raw is not None and (bounded or not np.isfinite(v_per)):
         x = np.asarray(raw, dtype=np.float64)
         x = x[np.isfinite(x)]
-        white = _white_sd(x, fs_hz) ** 2 * _gain(fs_hz, band_hz) if x.size > 64 else 0.0
+        where = WHITE_BAND if white_hz is None else (white_hz[0] / fs_hz, white_hz[1] / fs_hz)
+        white = _white_sd(x, fs_hz, *where) ** 2 * _gain(fs_hz, band_hz) if x.size > 64 else 0.0
     var = white
     if np.isfinite(v_per) and v_per >= white:
         var, method = v_per, "periods"

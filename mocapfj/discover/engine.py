@@ -516,7 +516,7 @@ def _nominal_sim(model, s: JointSignals, others: dict):
     """The nominal model's output-error comparison; a model that cannot be simulated on the
     recording is bad input (one line), not a traceback."""
     try:
-        return simulate_joint(model, s.t, s.q, s.q_m, s.u, others)
+        return simulate_joint(model, s.t, s.q, s.q_m, s.u, others, smoothing_hz=s.smoothing_hz)
     except RuntimeError as e:
         raise InputError(None, f"model.joints[{model.name}]", "a nominal model that can be simulated under the "
                          "recorded motor angle", " ".join(str(e).split())[:200]) from None
@@ -557,7 +557,7 @@ def _prove(model, steps: list, s: JointSignals, others: dict, with_sd: bool = Fa
     prev, gains, sds = before, [], []
     for m in steps:
         # in the nominal model's band: fits in different bands are not comparable
-        cur = simulate_joint(m, s.t, s.q, s.q_m, s.u, others, band_hz=before.band_hz)
+        cur = simulate_joint(m, s.t, s.q, s.q_m, s.u, others, band_hz=before.band_hz, smoothing_hz=s.smoothing_hz)
         gains.append(cur.fit - prev.fit)
         if with_sd:
             sds.append(prev.change_sd(cur))
@@ -775,7 +775,8 @@ def _revisit(jn, judge, found, current, rejected, held_out, families_of):
     current[jn] = m2
     if held_out is not None:
         data, others, _, chain = held_out(jn)
-        chain[-2:] = [simulate_joint(m, data.t, data.q, data.q_m, data.u, others, band_hz=chain[0].band_hz)
+        chain[-2:] = [simulate_joint(m, data.t, data.q, data.q_m, data.u, others, band_hz=chain[0].band_hz,
+                                      smoothing_hz=data.smoothing_hz)
                       for m in (m1, m2)]
     return fams
 
@@ -977,7 +978,8 @@ def _refit_with_nominal(jn, judge, nominal, found, current, rejected, held_out, 
     current[jn] = m
     if on_valid:
         data, others, _, ch = held_out(jn)
-        ch[:] = [ch[0]] + [simulate_joint(f["model"], data.t, data.q, data.q_m, data.u, others, band_hz=ch[0].band_hz)
+        ch[:] = [ch[0]] + [simulate_joint(f["model"], data.t, data.q, data.q_m, data.u, others, band_hz=ch[0].band_hz,
+                                          smoothing_hz=data.smoothing_hz)
                            for f in mine]
     # the parameters the refitted model uses (an effect's friction or spring replaces c, v or k)
     report["parameters"] = _nominal_changes(nom.params, comp.parts[0].params, sds[0][0], used_only=True)
@@ -1093,11 +1095,12 @@ def _reidentification(jn, s, nominal, current, found, rejected, held_out, on_val
         others = {k: v[m] for k, v in others_trial.items()}
         chain = [_nominal_sim(nominal, data, others)]
         for st in _steps(found, jn)[0]:
-            chain.append(simulate_joint(st, data.t, data.q, data.q_m, data.u, others, band_hz=chain[0].band_hz))
+            chain.append(simulate_joint(st, data.t, data.q, data.q_m, data.u, others, band_hz=chain[0].band_hz,
+                                         smoothing_hz=data.smoothing_hz))
     band = chain[0].band_hz
 
     def sim(model):
-        return simulate_joint(model, data.t, data.q, data.q_m, data.u, others, band_hz=band)
+        return simulate_joint(model, data.t, data.q, data.q_m, data.u, others, band_hz=band, smoothing_hz=data.smoothing_hz)
 
     try:
         if isinstance(made, Exception):
@@ -1446,9 +1449,9 @@ def _discover(signals: dict, models: dict, ahead, *, parallel: bool = True, fs_h
                 if restore is not None:
                     restore["sim"] = chain[-1]
                     chain[-1] = simulate_joint(current[jn], data.t, data.q, data.q_m, data.u, others,
-                                               band_hz=chain[0].band_hz)
+                                               band_hz=chain[0].band_hz, smoothing_hz=data.smoothing_hz)
                 chain.append(simulate_joint(augmented, data.t, data.q, data.q_m, data.u, others,
-                                            band_hz=chain[0].band_hz))
+                                            band_hz=chain[0].band_hz, smoothing_hz=data.smoothing_hz))
             z = win.z
             p_oe = min(1.0, float(stats.norm.sf(z)) * len(cands)) if np.isfinite(z) else 0.0
             if win.by_stiffness:

@@ -169,6 +169,15 @@ def fit_pct(y: np.ndarray, y_hat: np.ndarray) -> float:
     return float(100.0 * (1.0 - np.linalg.norm(y - y_hat) / den)) if den > 0 else float("nan")
 
 
+SMOOTHED_BAND = 0.5
+"""A recording whose markers were smoothed before export is compared below this share of the
+smoothing's corner (:mod:`mocapfj.joints.smoothing`): there a zero-phase Butterworth filter of order
+2-4 passes the motion within 1 %, at the corner it halves it; the corner is estimated within 20 %
+for a causal filter of order 2 (which passes 93 % at 0.63 of its corner, and delays it: a clock
+offset discovery names), and below the true one when the residuals carry the cluster template's
+error."""
+
+
 @dataclass(frozen=True, eq=False)
 class OutputError:
     """An output-error simulation compared with a recording (one joint, mocap samples).
@@ -185,7 +194,8 @@ class OutputError:
     floor_sd_delta, floor_sd_u the floors' SDs in points (a white floor's: the scatter of the
     noise realised in the band);
     fit_full_delta, fit_full_u: the fits at full rate, noise included; sd_delta, sd_u: the recorded
-    deflection's and torque's SDs in the band.
+    deflection's and torque's SDs in the band; smoothing_hz: the corner of the smoothing the
+    markers went through before export (the band is below it), None when they were not smoothed.
     """
 
     t: np.ndarray
@@ -212,6 +222,7 @@ class OutputError:
     fit_full_u: float = float("nan")
     sd_delta: float = float("nan")
     sd_u: float = float("nan")
+    smoothing_hz: float | None = None
 
     def change_sd(self, other: "OutputError") -> float:
         """The SD (points) of other.fit - self.fit that this recording's noise alone gives (`other`:
@@ -231,7 +242,8 @@ class OutputError:
                 "floor_sd": self.floor_sd, "floor_sd_deflection": self.floor_sd_delta, "floor_sd_torque": self.floor_sd_u,
                 "band_hz": self.band_hz, "period_s": self.period_s, "floor_method": self.floor_method,
                 "noise_deflection_rad": self.noise_delta_rad, "noise_torque_Nm": self.noise_u_Nm,
-                "deflection_full_band": self.fit_full_delta, "torque_full_band": self.fit_full_u}
+                "deflection_full_band": self.fit_full_delta, "torque_full_band": self.fit_full_u,
+                **({"markers_smoothed_hz": self.smoothing_hz} if self.smoothing_hz is not None else {})}
 
 
 def _plain_link(model: JointModel, t, drive, d_span: float, ext=None):
@@ -390,7 +402,7 @@ def predict(model: JointModel, t, q, q_m, ext=None, *, rtol: float = 1e-4, atol:
 
 def simulate_joint(model: JointModel, t, q, q_m, u, others_qdd: dict | None = None, *, trim_s: float = 1.0,
                    rtol: float = 1e-4, atol: float = 1e-7, period_s: float | None | str = "auto",
-                   band_hz: float | None = None) -> OutputError:
+                   band_hz: float | None = None, smoothing_hz: float | None = None) -> OutputError:
     """Simulate `model` driven by the recorded motor angle and compare with the recording.
 
     t, q, q_m, u : (T,) on one clock (s, rad, rad, N m); others_qdd : {joint: (T,) rad/s^2} the
@@ -401,8 +413,11 @@ def simulate_joint(model: JointModel, t, q, q_m, u, others_qdd: dict | None = No
     for the noise floor; "auto" finds it in q_m (:func:`.compare.excitation_period_s`), None: none.
     band_hz : the comparison band; default the model's own (:func:`.compare.comparison_band_hz` at
     the deflections it simulates). Models compared with each other take one band.
+    smoothing_hz : the corner of a low-pass the markers went through before export
+    (`JointSignals.smoothing_hz`): the default band is at most SMOOTHED_BAND of it, and the
+    deflection's white floor is read below it (:data:`.compare.SMOOTHED_WHITE`).
     """
-    from .compare import combined_fit, combined_floor_sd, compare_channel, comparison_band_hz
+    from .compare import SMOOTHED_WHITE, combined_fit, combined_floor_sd, compare_channel, comparison_band_hz
 
     t, q, q_m, u = (np.asarray(a, dtype=np.float64) for a in (t, q, q_m, u))
     fs = 1.0 / float(np.median(np.diff(t)))
@@ -426,12 +441,20 @@ def simulate_joint(model: JointModel, t, q, q_m, u, others_qdd: dict | None = No
         lo, hi = np.nanpercentile(d_sim[keep], [1.0, 99.0]) if keep.any() else (-0.01, 0.01)
         inertia = model.I if ctx is None else model.I + float(np.mean(ctx.I))      # a robot's link: its mean
         band = comparison_band_hz(model.stiffness(lo, hi) if hi - lo > 1e-7 else model.stiffness(), inertia, fs)
+        if smoothing_hz is not None:
+            band = min(band, SMOOTHED_BAND * float(smoothing_hz))
     else:
         band = float(band_hz)
     inner = (t >= t[0] + trim_s) & (t <= t[-1] - trim_s)
     if period_s == "auto":
         period_s = _period_s(q_m[inner], fs)
-    cd = compare_channel(d_rec, d_sim, q, fs, band, keep, period_s, center=True)
+    if smoothing_hz is None:
+        cd = compare_channel(d_rec, d_sim, q, fs, band, keep, period_s, center=True)
+    else:
+        # markers smoothed before export: no white floor above the corner; below it the link
+        # angle moves, its deflection from the motor's far less
+        cd = compare_channel(d_rec, d_sim, d_rec, fs, band, keep, period_s, center=True,
+                             white_hz=(SMOOTHED_WHITE[0] * smoothing_hz, SMOOTHED_WHITE[1] * smoothing_hz))
     cu = compare_channel(u, u_sim, u, fs, band, keep, period_s, bounded=True)
     return OutputError(t=t, q_sim=q_sim, delta_sim=d_sim, u_sim=u_sim, r_delta=r_d, r_u=r_u,
                        fit_delta=cd.fit, fit_u=cu.fit, fit=combined_fit(cd.e, cu.e),
@@ -440,4 +463,4 @@ def simulate_joint(model: JointModel, t, q, q_m, u, others_qdd: dict | None = No
                        band_hz=band, period_s=period_s, floor_method=cd.method if cd.method == cu.method else
                        f"{cd.method}/{cu.method}", noise_delta_rad=cd.noise_sd, noise_u_Nm=cu.noise_sd,
                        fit_full_delta=float(100 * (1 - e_d)), fit_full_u=float(100 * (1 - e_u)),
-                       sd_delta=cd.sd_y, sd_u=cu.sd_y)
+                       sd_delta=cd.sd_y, sd_u=cu.sd_y, smoothing_hz=smoothing_hz)

@@ -74,7 +74,8 @@ def segment(s: JointSignals, start: float, end: float) -> JointSignals:
         kw = {"t_c": s.t_c[mc], "q_m_c": s.q_m_c[mc], "u_c": s.u_c[mc], "fs_c_hz": s.fs_c_hz}
     filled = None if s.filled is None else s.filled[m]
     return JointSignals(t=s.t[m], q=s.q[m], q_m=s.q_m[m], u=s.u[m], fs_hz=s.fs_hz,
-                        n_filled=int(filled.sum()) if filled is not None else 0, name=s.name, filled=filled, **kw)
+                        n_filled=int(filled.sum()) if filled is not None else 0, name=s.name, filled=filled,
+                        smoothing_hz=s.smoothing_hz, **kw)
 
 
 def _keep_terms(model: JointModel, nominal: JointModel) -> JointModel:
