@@ -44,6 +44,10 @@ there is no model file: ``mocapfj discover IDENT --validation VALID``, the nomin
 on the spot from the trial (motor-first, a linear spring), as a lab without a model runs it; the
 gap on validation is then the true model's fit over that identified one's.
 
+With ``--smooth HZ`` every recording's markers go through a zero-phase Butterworth low-pass of
+order 4 at HZ before discovery, as a mocap vendor's smoothing before export does
+(docs/conventions.md, "Markers smoothed before export").
+
 Per kind it prints:
 - named first, and how often the named effect is the planted one; again on the cases whose trial
   shows the effect (column ``t_sds``: the true model's trial fit above the nominal's, in noise SDs
@@ -231,7 +235,7 @@ def _models(truth: dict, case, delay_s: float):
 
 def run_case(args) -> dict:
     """Generate (cached) and run one case of one kind."""
-    case, kind, root, s, sign, reuse, spot = args
+    case, kind, root, s, sign, reuse, spot, smooth = args
     import mocapfj
     from mocapfj.discover import write_model_file
     from mocapfj.discover.model import simulate_joint
@@ -250,11 +254,13 @@ def run_case(args) -> dict:
             truth = _write(planted, ident, delay)
         valid = base / f"{kind}_valid"
         _write(_validation_case(planted, case.seed), valid, delay)
+        if smooth:
+            ident, valid = _smoothed(ident, smooth), _smoothed(valid, smooth)
         nominal, true = _models(truth, planted, delay)
         mfile = base / f"{kind}_nominal.toml"
         write_model_file(mfile, [nominal])
         tic = time.perf_counter()
-        outdir = base / _out_name(kind, spot)
+        outdir = base / _out_name(kind, spot, smooth)
         done = outdir / "discovery.json"
         if reuse and done.exists():                  # a discovery an interrupted run finished
             from mocapfj.io import read_json
@@ -266,14 +272,14 @@ def run_case(args) -> dict:
             out["seconds"] = time.perf_counter() - tic
         sv = mocapfj.signals(valid)["j1"]
         band = r["validation"]["fits"]["j1"]["before"]["band_hz"]            # the nominal model's band
-        tv_oe = simulate_joint(true, sv.t, sv.q, sv.q_m, sv.u, band_hz=band)
+        tv_oe = simulate_joint(true, sv.t, sv.q, sv.q_m, sv.u, band_hz=band, smoothing_hz=sv.smoothing_hz)
         tv = tv_oe.summary()
         # how far the trial itself shows the effect: the true model against the nominal on it,
         # in noise SDs of that change (an effect the trial does not excite cannot be found there)
         st = mocapfj.signals(ident)["j1"]
         band_t = r["fits"]["j1"]["before"]["band_hz"]
-        nom_t = simulate_joint(nominal, st.t, st.q, st.q_m, st.u, band_hz=band_t)
-        true_t = simulate_joint(true, st.t, st.q, st.q_m, st.u, band_hz=band_t)
+        nom_t = simulate_joint(nominal, st.t, st.q, st.q_m, st.u, band_hz=band_t, smoothing_hz=st.smoothing_hz)
+        true_t = simulate_joint(true, st.t, st.q, st.q_m, st.u, band_hz=band_t, smoothing_hz=st.smoothing_hz)
         sd_t = nom_t.change_sd(true_t)
         out.update(t_gap=true_t.fit - nom_t.fit, t_gap_sds=(true_t.fit - nom_t.fit) / sd_t if sd_t > 0 else 0.0)
         if spot and (outdir / "nominal.toml").exists():
@@ -281,13 +287,13 @@ def run_case(args) -> dict:
             # of it: the true model against that model (a Stribeck friction at 0.09 rad/s on a
             # heavy joint is mostly more Coulomb and less viscous friction to a linear model)
             spot_m = mocapfj.api.joint_models(str(outdir / "nominal.toml"), ["j1"])["j1"]
-            spot_t = simulate_joint(spot_m, st.t, st.q, st.q_m, st.u, band_hz=band_t)
+            spot_t = simulate_joint(spot_m, st.t, st.q, st.q_m, st.u, band_hz=band_t, smoothing_hz=st.smoothing_hz)
             sd_s = spot_t.change_sd(true_t)
             out["t_spot_sds"] = (true_t.fit - spot_t.fit) / sd_s if sd_s > 0 else 0.0
         # how far the validation recording shows the effect against the nominal discovery started
         # from: a gap below its noise has no half to recover
         v_nom = spot_m if spot and (outdir / "nominal.toml").exists() else nominal
-        nom_v = simulate_joint(v_nom, sv.t, sv.q, sv.q_m, sv.u, band_hz=band)
+        nom_v = simulate_joint(v_nom, sv.t, sv.q, sv.q_m, sv.u, band_hz=band, smoothing_hz=sv.smoothing_hz)
         sd_v = nom_v.change_sd(tv_oe)
         out["v_gap_sds"] = (tv_oe.fit - nom_v.fit) / sd_v if sd_v > 0 else 0.0
         if kind == "two_effects":
@@ -296,7 +302,8 @@ def run_case(args) -> dict:
             each = {}
             for k, other in zip(_pair(case.name), reversed(_pair(case.name))):
                 alone, d_alone = _planted(case, other, stats, t_base["noise"], s, sign)
-                without = simulate_joint(_models(truth, alone, d_alone)[1], st.t, st.q, st.q_m, st.u, band_hz=band_t)
+                without = simulate_joint(_models(truth, alone, d_alone)[1], st.t, st.q, st.q_m, st.u, band_hz=band_t,
+                                         smoothing_hz=st.smoothing_hz)
                 sd_k = without.change_sd(true_t)
                 each[k] = (true_t.fit - without.fit) / sd_k if sd_k > 0 else 0.0
             out["t_sds_each"] = each
@@ -316,9 +323,35 @@ def run_case(args) -> dict:
     return out
 
 
-def _out_name(kind: str, spot: bool) -> str:
-    """A case's discovery directory for `kind` (with the nominal identified on the spot, `spot`)."""
-    return f"{kind}_{'spot_' if spot else ''}out"
+def _out_name(kind: str, spot: bool, smooth: float | None = None) -> str:
+    """A case's discovery directory for `kind` (with the nominal identified on the spot, `spot`; on
+    markers smoothed at `smooth` Hz)."""
+    return f"{kind}_{'spot_' if spot else ''}{f'sm{smooth:g}_' if smooth else ''}out"
+
+
+def _smoothed(bundle: Path, fc_hz: float) -> Path:
+    """A copy of `bundle` beside it whose markers went through a zero-phase Butterworth low-pass
+    of order 4 at fc_hz (a mocap vendor's smoothing before export; lost samples stay lost)."""
+    from dataclasses import replace as dc_replace
+
+    from scipy.signal import butter, filtfilt
+
+    from mocapfj.io.c3d import read_c3d, write_c3d
+
+    out = bundle.with_name(f"{bundle.name}_sm{fc_hz:g}")
+    if out.exists():
+        shutil.rmtree(out)
+    shutil.copytree(bundle, out)
+    m = read_c3d(bundle / "markers.c3d")
+    x = m.xyz.copy()
+    b, a = butter(4, fc_hz / (m.rate_hz / 2))
+    T = np.arange(x.shape[0])
+    for j in range(x.shape[1]):
+        ok = np.isfinite(x[:, j, 0])
+        for c in range(3):
+            x[:, j, c] = np.where(ok, filtfilt(b, a, np.interp(T, T[ok], x[ok, j, c])), np.nan)
+    write_c3d(out / "markers.c3d", dc_replace(m, xyz=x))
+    return out
 
 
 def _size(kind, case, delay):
@@ -462,6 +495,9 @@ def main(argv=None) -> int:
     ap.add_argument("--spot", action="store_true",
                     help="no model file: the nominal model identified on the spot from the trial, as "
                          "`mocapfj discover IDENT --validation VALID` does (module docstring)")
+    ap.add_argument("--smooth", type=float, default=None, metavar="HZ",
+                    help="every recording's markers smoothed at HZ before discovery (zero-phase Butterworth, "
+                         "order 4: a mocap vendor's smoothing before export)")
     args = ap.parse_args(argv)
 
     from mocapfj.synth.hinge import sample_cases
@@ -474,16 +510,17 @@ def main(argv=None) -> int:
         for k in kinds:        # a kind's size depends on (seed, case, kind) alone
             rng = np.random.default_rng(np.random.SeedSequence([args.base_seed, i, KINDS.index(k)]))
             jobs.append((c, k, root, float(rng.uniform(0.3, 0.8)), float(rng.choice([-1.0, 1.0])), args.reuse,
-                         args.spot))
+                         args.spot, args.smooth))
     if args.only_done:
-        jobs = [j for j in jobs if (root / j[0].name / _out_name(j[1], args.spot) / "discovery.json").exists()]
+        jobs = [j for j in jobs if (root / j[0].name / _out_name(j[1], args.spot, args.smooth) / "discovery.json").exists()]
     tic = time.perf_counter()
     # one worker per case's kinds in order: the control bundle is written before the others use it
     with ProcessPoolExecutor(args.jobs) as ex:
         first = list(ex.map(run_case, [j for j in jobs if j[1] == kinds[0]]))
         rest = list(ex.map(run_case, [j for j in jobs if j[1] != kinds[0]]))
     rows = first + rest
-    print(f"discovery grid{' (nominal identified on the spot)' if args.spot else ''}: {len(cases)} cases x "
+    print(f"discovery grid{' (nominal identified on the spot)' if args.spot else ''}"
+          f"{f' (markers smoothed at {args.smooth:g} Hz)' if args.smooth else ''}: {len(cases)} cases x "
           f"{len(kinds)} kinds, base seed {args.base_seed}, "
           f"{time.perf_counter() - tic:.0f} s wall on {args.jobs} processes")
     print(f"{'case':20s} {'family':8s} {'kind':11s} {'s':>4s} {'named':28s} {'fit before->after':>18s} "
@@ -505,7 +542,7 @@ def main(argv=None) -> int:
     errs = [r for r in rows if "error" in r]
     for r in errs[:3]:
         print(r["trace"])
-    (root / "results.json").write_text(json.dumps([{k: v for k, v in r.items() if k != "trace"} for r in rows],
+    (root / f"results{f'_sm{args.smooth:g}' if args.smooth else ''}.json").write_text(json.dumps([{k: v for k, v in r.items() if k != "trace"} for r in rows],
                                                   indent=1, default=float))
     return 0
 
