@@ -7,6 +7,8 @@ from __future__ import annotations
 
 from dataclasses import replace
 
+import pytest
+
 import mocapfj
 from mocapfj.discover import engine
 from mocapfj.dynamics import LinearSpring
@@ -68,3 +70,22 @@ def test_a_three_slope_spring_with_a_soft_first_slope_reads_also_as_free_play():
     assert abs(soft["as_free_play_gap_mrad"] - 2 * 0.0643 * (1 - 1192.3 / 5062.5)) < 1e-3
     assert 0.078 < soft["as_free_play_gap_mrad"] < 0.11
     assert _soft_zone(np.array([0.58, 1.0, 1.33]) * 5000.0, 7.3e-5) is None
+
+
+def test_a_spring_slack_about_zero_load_is_named_free_play():
+    """The two-joint grid's seed 40000, case 0: free play of 2.91 mrad on the elbow was fitted as a
+    three-slope spring, k1 234, k2 4626, k3 3702 N m/rad, tau1 0.366 N m (its third slope 20 % off
+    the second, so no soft zone). It is named free play of 2 d1 (1 - k1/k2) = 2.97 mrad; a
+    datasheet-like wind-up (k1 0.58 k2) stays a stiffening spring."""
+    from mocapfj.discover.engine import as_free_play
+
+    e = {"name": "stiffening", "joint": "j3", "explanation": "",
+         "parameters": {"k1": 233.99, "k2": 4626.2, "k3": 3701.6, "tau1": 0.36582, "tau2": 72.25}, "location": {}}
+    assert as_free_play(e)
+    assert e["name"] == "backlash"
+    assert e["parameters"]["gap_rad"] == pytest.approx(2 * 0.36582 / 233.99 * (1 - 233.99 / 4626.2), rel=1e-9)
+    assert abs(e["parameters"]["gap_rad"] - 2.91e-3) < 0.1e-3
+    assert "free play" in e["explanation"] and e["location"]["as_free_play"]["fitted_as"] == "stiffening"
+    w = {"name": "stiffening", "joint": "j1", "parameters": {"k1": 2900.0, "k2": 5000.0, "k3": 6650.0, "tau1": 0.2,
+                                                              "tau2": 3.1}}
+    assert not as_free_play(w) and w["name"] == "stiffening"
