@@ -238,7 +238,7 @@ def run_case(args) -> dict:
     case, kind, root, s, sign, reuse, spot, smooth = args
     import mocapfj
     from mocapfj.discover import write_model_file
-    from mocapfj.discover.model import simulate_joint
+    from mocapfj.discover.model import simulate_signals
     from mocapfj.pipeline import run_discover
 
     base = root / case.name
@@ -272,14 +272,14 @@ def run_case(args) -> dict:
             out["seconds"] = time.perf_counter() - tic
         sv = mocapfj.signals(valid)["j1"]
         band = r["validation"]["fits"]["j1"]["before"]["band_hz"]            # the nominal model's band
-        tv_oe = simulate_joint(true, sv.t, sv.q, sv.q_m, sv.u, band_hz=band, smoothing_hz=sv.smoothing_hz)
+        tv_oe = simulate_signals(true, sv, band_hz=band)
         tv = tv_oe.summary()
         # how far the trial itself shows the effect: the true model against the nominal on it,
         # in noise SDs of that change (an effect the trial does not excite cannot be found there)
         st = mocapfj.signals(ident)["j1"]
         band_t = r["fits"]["j1"]["before"]["band_hz"]
-        nom_t = simulate_joint(nominal, st.t, st.q, st.q_m, st.u, band_hz=band_t, smoothing_hz=st.smoothing_hz)
-        true_t = simulate_joint(true, st.t, st.q, st.q_m, st.u, band_hz=band_t, smoothing_hz=st.smoothing_hz)
+        nom_t = simulate_signals(nominal, st, band_hz=band_t)
+        true_t = simulate_signals(true, st, band_hz=band_t)
         sd_t = nom_t.change_sd(true_t)
         out.update(t_gap=true_t.fit - nom_t.fit, t_gap_sds=(true_t.fit - nom_t.fit) / sd_t if sd_t > 0 else 0.0)
         if spot and (outdir / "nominal.toml").exists():
@@ -287,13 +287,13 @@ def run_case(args) -> dict:
             # of it: the true model against that model (a Stribeck friction at 0.09 rad/s on a
             # heavy joint is mostly more Coulomb and less viscous friction to a linear model)
             spot_m = mocapfj.api.joint_models(str(outdir / "nominal.toml"), ["j1"])["j1"]
-            spot_t = simulate_joint(spot_m, st.t, st.q, st.q_m, st.u, band_hz=band_t, smoothing_hz=st.smoothing_hz)
+            spot_t = simulate_signals(spot_m, st, band_hz=band_t)
             sd_s = spot_t.change_sd(true_t)
             out["t_spot_sds"] = (true_t.fit - spot_t.fit) / sd_s if sd_s > 0 else 0.0
         # how far the validation recording shows the effect against the nominal discovery started
         # from: a gap below its noise has no half to recover
         v_nom = spot_m if spot and (outdir / "nominal.toml").exists() else nominal
-        nom_v = simulate_joint(v_nom, sv.t, sv.q, sv.q_m, sv.u, band_hz=band, smoothing_hz=sv.smoothing_hz)
+        nom_v = simulate_signals(v_nom, sv, band_hz=band)
         sd_v = nom_v.change_sd(tv_oe)
         out["v_gap_sds"] = (tv_oe.fit - nom_v.fit) / sd_v if sd_v > 0 else 0.0
         if kind == "two_effects":
@@ -302,8 +302,7 @@ def run_case(args) -> dict:
             each = {}
             for k, other in zip(_pair(case.name), reversed(_pair(case.name))):
                 alone, d_alone = _planted(case, other, stats, t_base["noise"], s, sign)
-                without = simulate_joint(_models(truth, alone, d_alone)[1], st.t, st.q, st.q_m, st.u, band_hz=band_t,
-                                         smoothing_hz=st.smoothing_hz)
+                without = simulate_signals(_models(truth, alone, d_alone)[1], st, band_hz=band_t)
                 sd_k = without.change_sd(true_t)
                 each[k] = (true_t.fit - without.fit) / sd_k if sd_k > 0 else 0.0
             out["t_sds_each"] = each
@@ -331,26 +330,15 @@ def _out_name(kind: str, spot: bool, smooth: float | None = None) -> str:
 
 def _smoothed(bundle: Path, fc_hz: float) -> Path:
     """A copy of `bundle` beside it whose markers went through a zero-phase Butterworth low-pass
-    of order 4 at fc_hz (a mocap vendor's smoothing before export; lost samples stay lost)."""
-    from dataclasses import replace as dc_replace
-
-    from scipy.signal import butter, filtfilt
-
+    of order 4 at fc_hz (:func:`mocapfj.synth.markers.vendor_smoothed`)."""
     from mocapfj.io.c3d import read_c3d, write_c3d
+    from mocapfj.synth.markers import vendor_smoothed
 
     out = bundle.with_name(f"{bundle.name}_sm{fc_hz:g}")
     if out.exists():
         shutil.rmtree(out)
     shutil.copytree(bundle, out)
-    m = read_c3d(bundle / "markers.c3d")
-    x = m.xyz.copy()
-    b, a = butter(4, fc_hz / (m.rate_hz / 2))
-    T = np.arange(x.shape[0])
-    for j in range(x.shape[1]):
-        ok = np.isfinite(x[:, j, 0])
-        for c in range(3):
-            x[:, j, c] = np.where(ok, filtfilt(b, a, np.interp(T, T[ok], x[ok, j, c])), np.nan)
-    write_c3d(out / "markers.c3d", dc_replace(m, xyz=x))
+    write_c3d(out / "markers.c3d", vendor_smoothed(read_c3d(bundle / "markers.c3d"), fc_hz))
     return out
 
 
@@ -512,7 +500,8 @@ def main(argv=None) -> int:
             jobs.append((c, k, root, float(rng.uniform(0.3, 0.8)), float(rng.choice([-1.0, 1.0])), args.reuse,
                          args.spot, args.smooth))
     if args.only_done:
-        jobs = [j for j in jobs if (root / j[0].name / _out_name(j[1], args.spot, args.smooth) / "discovery.json").exists()]
+        jobs = [j for j in jobs
+                if (root / j[0].name / _out_name(j[1], args.spot, args.smooth) / "discovery.json").exists()]
     tic = time.perf_counter()
     # one worker per case's kinds in order: the control bundle is written before the others use it
     with ProcessPoolExecutor(args.jobs) as ex:
@@ -542,8 +531,9 @@ def main(argv=None) -> int:
     errs = [r for r in rows if "error" in r]
     for r in errs[:3]:
         print(r["trace"])
-    (root / f"results{f'_sm{args.smooth:g}' if args.smooth else ''}.json").write_text(json.dumps([{k: v for k, v in r.items() if k != "trace"} for r in rows],
-                                                  indent=1, default=float))
+    name = f"results{f'_sm{args.smooth:g}' if args.smooth else ''}.json"
+    (root / name).write_text(json.dumps([{k: v for k, v in r.items() if k != "trace"} for r in rows],
+                                        indent=1, default=float))
     return 0
 
 

@@ -45,8 +45,8 @@ import numpy as np
 from ..ident.conditioning import lowpass, noise_floor_sd, noise_gain
 from .memo import by_content
 
-__all__ = ["SMOOTHED_WHITE", "BAND_FRACTION", "MIN_BAND_HZ", "MIN_PERIOD_CORR", "comparison_band_hz", "excitation_period_s",
-           "Channel", "compare_channel", "in_band", "combined_fit", "combined_floor_sd", "WHITE_BAND", "fit_change_sd"]
+__all__ = ["SMOOTHED_WHITE", "BAND_FRACTION", "MIN_BAND_HZ", "MIN_PERIOD_CORR", "comparison_band_hz",
+           "excitation_period_s", "Channel", "compare_channel", "in_band", "combined_fit", "combined_floor_sd", "WHITE_BAND", "fit_change_sd"]
 
 BAND_FRACTION = 0.6
 """The comparison band's upper edge as a fraction of the link's resonance sqrt(k / I) / 2 pi: the

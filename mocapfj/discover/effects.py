@@ -439,11 +439,8 @@ def _three_slope(fam: Families, mask) -> Candidate | None:
                     f"{K[1]:.4g} N m/rad up to {tau2:.1f} N m and {K[2]:.4g} N m/rad beyond. Harmonic drives stiffen "
                     f"as more flexspline teeth come into contact (the K1 < K2 < K3 of their datasheets, soft wind-up "
                     f"at low torque); a three-slope spring replaces the linear one.")
-            if soft is not None:
-                text += (f" Its first slope is a soft zone of +-{soft['half_width_mrad']:.3g} mrad about zero load, "
-                         f"beyond which one stiffness holds: what free play of {soft['as_free_play_gap_mrad']:.3g} mrad "
-                         f"with a little compliance in it would also give. Recordings whose deflection crosses zero "
-                         f"further tell the two apart.")
+            # a first slope below SOFT_ZONE[0] of the second is named free play at the output, with
+            # its own explanation (:func:`.engine.as_free_play`)
             return text
         el = PiecewiseSpring(k1=float(K[0]), k2=float(K[1]), k3=float(K[2]), tau1=float(tau1), tau2=float(tau2))
         return Candidate("stiffening", "spring", params, 5, contribution, lambda m: m.with_(spring=el), loc, explain,

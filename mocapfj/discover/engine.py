@@ -40,7 +40,7 @@ from ..ident.conditioning import derivatives, lowpass
 from .effects import EFFECTS, FITTERS, OWN_STIFFNESS, SOFT_ZONE, SPRING_EFFECTS, Candidate, nominal_parameters
 from .effects import stiffness as effects_stiffness
 from .context import ROBOT_KEY, robot_context, robot_of
-from .model import simulate_joint
+from .model import simulate_signals
 from .reident import REID_EFFECTS, robot_reidentified, train_context, train_part
 from .refit import refit
 from .tournament import LOSS_SDS, TIE_SDS, Judge, chain, form_sds, joint, pool, score_dict, split_pair, split_parts
@@ -551,7 +551,7 @@ def _nominal_sim(model, s: JointSignals, others: dict):
     """The nominal model's output-error comparison; a model that cannot be simulated on the
     recording is bad input (one line), not a traceback."""
     try:
-        return simulate_joint(model, s.t, s.q, s.q_m, s.u, others, smoothing_hz=s.smoothing_hz)
+        return simulate_signals(model, s, others)
     except RuntimeError as e:
         raise InputError(None, f"model.joints[{model.name}]", "a nominal model that can be simulated under the "
                          "recorded motor angle", " ".join(str(e).split())[:200]) from None
@@ -592,7 +592,7 @@ def _prove(model, steps: list, s: JointSignals, others: dict, with_sd: bool = Fa
     prev, gains, sds = before, [], []
     for m in steps:
         # in the nominal model's band: fits in different bands are not comparable
-        cur = simulate_joint(m, s.t, s.q, s.q_m, s.u, others, band_hz=before.band_hz, smoothing_hz=s.smoothing_hz)
+        cur = simulate_signals(m, s, others, band_hz=before.band_hz)
         gains.append(cur.fit - prev.fit)
         if with_sd:
             sds.append(prev.change_sd(cur))
@@ -810,9 +810,7 @@ def _revisit(jn, judge, found, current, rejected, held_out, families_of):
     current[jn] = m2
     if held_out is not None:
         data, others, _, chain = held_out(jn)
-        chain[-2:] = [simulate_joint(m, data.t, data.q, data.q_m, data.u, others, band_hz=chain[0].band_hz,
-                                      smoothing_hz=data.smoothing_hz)
-                      for m in (m1, m2)]
+        chain[-2:] = [simulate_signals(m, data, others, band_hz=chain[0].band_hz) for m in (m1, m2)]
     return fams
 
 
@@ -1013,8 +1011,7 @@ def _refit_with_nominal(jn, judge, nominal, found, current, rejected, held_out, 
     current[jn] = m
     if on_valid:
         data, others, _, ch = held_out(jn)
-        ch[:] = [ch[0]] + [simulate_joint(f["model"], data.t, data.q, data.q_m, data.u, others, band_hz=ch[0].band_hz,
-                                          smoothing_hz=data.smoothing_hz)
+        ch[:] = [ch[0]] + [simulate_signals(f["model"], data, others, band_hz=ch[0].band_hz)
                            for f in mine]
     # the parameters the refitted model uses (an effect's friction or spring replaces c, v or k)
     report["parameters"] = _nominal_changes(nom.params, comp.parts[0].params, sds[0][0], used_only=True)
@@ -1130,12 +1127,11 @@ def _reidentification(jn, s, nominal, current, found, rejected, held_out, on_val
         others = {k: v[m] for k, v in others_trial.items()}
         chain = [_nominal_sim(nominal, data, others)]
         for st in _steps(found, jn)[0]:
-            chain.append(simulate_joint(st, data.t, data.q, data.q_m, data.u, others, band_hz=chain[0].band_hz,
-                                         smoothing_hz=data.smoothing_hz))
+            chain.append(simulate_signals(st, data, others, band_hz=chain[0].band_hz))
     band = chain[0].band_hz
 
     def sim(model):
-        return simulate_joint(model, data.t, data.q, data.q_m, data.u, others, band_hz=band, smoothing_hz=data.smoothing_hz)
+        return simulate_signals(model, data, others, band_hz=band)
 
     try:
         if isinstance(made, Exception):
@@ -1446,8 +1442,8 @@ def _discover(signals: dict, models: dict, ahead, *, parallel: bool = True, fs_h
             judged = [judge.judge(jn, c, sc, current[jn], n_tests, prior=_prior(found, jn)) for jn, c, sc in cands]
             judged += _stiffness_judged(judge, judged, fams, current, holdout, n_tests, found)
             # the close contenders refitted with the joint's first effect, which holds part of them
-            judged = judge.with_prior(judged, current, {jn: _prior(found, jn) for jn in names
-                                                        if _prior(found, jn) is not None}, n_tests)
+            priors = {jn: p for jn in names if (p := _prior(found, jn)) is not None}
+            judged = judge.with_prior(judged, current, priors, n_tests)
             # the nominal model identified on this trial: the leaders not admitted with its parameters
             # held, ranked above every admitted one, judged with them free
             judged = judge.with_nominal(judged, current, n_tests)
@@ -1483,10 +1479,8 @@ def _discover(signals: dict, models: dict, ahead, *, parallel: bool = True, fs_h
                 data, others, where, chain = held_out(jn)
                 if restore is not None:
                     restore["sim"] = chain[-1]
-                    chain[-1] = simulate_joint(current[jn], data.t, data.q, data.q_m, data.u, others,
-                                               band_hz=chain[0].band_hz, smoothing_hz=data.smoothing_hz)
-                chain.append(simulate_joint(augmented, data.t, data.q, data.q_m, data.u, others,
-                                            band_hz=chain[0].band_hz, smoothing_hz=data.smoothing_hz))
+                    chain[-1] = simulate_signals(current[jn], data, others, band_hz=chain[0].band_hz)
+                chain.append(simulate_signals(augmented, data, others, band_hz=chain[0].band_hz))
             z = win.z
             p_oe = min(1.0, float(stats.norm.sf(z)) * len(cands)) if np.isfinite(z) else 0.0
             if win.by_stiffness:

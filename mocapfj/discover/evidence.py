@@ -24,7 +24,7 @@ import numpy as np
 from ..dynamics import JointModel
 from ..types import JointSignals
 from .compare import in_band, fit_change_sd
-from .model import OutputError, coupling_input, link_context, predict, simulate_joint
+from .model import OutputError, coupling_input, link_context, predict, simulate_signals
 
 __all__ = ["Evidence", "Score"]
 
@@ -62,8 +62,7 @@ class Evidence:
         if noise_from is None:
             if model is None:
                 raise ValueError("Evidence needs noise_from or model")
-            noise_from = simulate_joint(model, t, q, q_m, u, self.others, trim_s=trim_s, band_hz=self.band_hz,
-                                        smoothing_hz=s.smoothing_hz)
+            noise_from = simulate_signals(model, s, self.others, trim_s=trim_s, band_hz=self.band_hz)
         self.reference = noise_from
         self.noise_delta, self.noise_u = noise_from.noise_delta_rad, noise_from.noise_u_Nm
 
@@ -164,5 +163,4 @@ class Evidence:
 
     def compare(self, model: JointModel) -> OutputError:
         """The full comparison (:func:`.model.simulate_joint`) in this band."""
-        return simulate_joint(model, self.t, self.q, self.q_m, self.u, self.others, trim_s=self.trim_s,
-                              band_hz=self.band_hz, smoothing_hz=self.s.smoothing_hz)
+        return simulate_signals(model, self.s, self.others, trim_s=self.trim_s, band_hz=self.band_hz)

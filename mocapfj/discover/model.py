@@ -37,7 +37,8 @@ from ..errors import InputError
 from ..io.tomlio import describe, read_toml, require, write_toml
 from .memo import by_content, spline_rates, wiener_drive_of
 
-__all__ = ["JointModel", "read_model_file", "write_model_file", "fit_pct", "simulate_joint", "OutputError", "link_context"]
+__all__ = ["JointModel", "read_model_file", "write_model_file", "fit_pct", "simulate_joint", "simulate_signals", "OutputError",
+           "link_context"]
 
 MODEL_FORMAT = "mocapfj.model/1"
 
@@ -172,10 +173,9 @@ def fit_pct(y: np.ndarray, y_hat: np.ndarray) -> float:
 SMOOTHED_BAND = 0.5
 """A recording whose markers were smoothed before export is compared below this share of the
 smoothing's corner (:mod:`mocapfj.joints.smoothing`): there a zero-phase Butterworth filter of order
-2-4 passes the motion within 1 %, at the corner it halves it; the corner is estimated within 20 %
-for a causal filter of order 2 (which passes 93 % at 0.63 of its corner, and delays it: a clock
-offset discovery names), and below the true one when the residuals carry the cluster template's
-error."""
+2-4 passes the motion within 1 %, at the corner it halves it; the corner is read at 0.63-0.75 of
+the filter's on the hinge grid (the residuals carry the cluster template's error too), never above
+it. A causal filter's corner is not read reliably (:mod:`mocapfj.joints.smoothing`)."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -464,3 +464,9 @@ def simulate_joint(model: JointModel, t, q, q_m, u, others_qdd: dict | None = No
                        f"{cd.method}/{cu.method}", noise_delta_rad=cd.noise_sd, noise_u_Nm=cu.noise_sd,
                        fit_full_delta=float(100 * (1 - e_d)), fit_full_u=float(100 * (1 - e_u)),
                        sd_delta=cd.sd_y, sd_u=cu.sd_y, smoothing_hz=smoothing_hz)
+
+
+def simulate_signals(model: JointModel, s, others_qdd: dict | None = None, **kw) -> OutputError:
+    """:func:`simulate_joint` on a joint's signals `s` (:class:`mocapfj.types.JointSignals`), with
+    the corner of the smoothing its markers went through (`s.smoothing_hz`)."""
+    return simulate_joint(model, s.t, s.q, s.q_m, s.u, others_qdd, smoothing_hz=s.smoothing_hz, **kw)

@@ -933,8 +933,8 @@ def score_covariance(A: np.ndarray, r: np.ndarray, fs: float, white_var: float) 
     """The covariance of A' e (p, p) for noise e whose in-band residual is r (n,), A (n, p) the
     in-band changes of the prediction with the parameters: (1/n) sum_k Re(A_k^* A_k') P(f_k) over
     the DFT bins, P the residual's spectral density per sample (Welch, WELCH_S segments,
-    SMOOTH_BINS averaged), at least `white_var` (the noise's, white; sigma^2 / g). For white noise this is white_var A'A (within
-    the spectrum's scatter above that floor, up to 30 %). Noise that is not white in the band, a
+    SMOOTH_BINS averaged), at least `white_var` (the noise's, white; sigma^2 / g). For white
+    noise this is white_var A'A (within the spectrum's scatter above that floor, up to 30 %). Noise that is not white in the band, a
     drive's torque log (AR(1), 2-50 ms) or markers smoothed by the mocap vendor's software, has its
     density highest at the low frequencies the excitation and the parameters' changes occupy; taken
     as white, the covariance was 20-80 times short for AR(1) noise of 10-40 ms

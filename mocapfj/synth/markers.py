@@ -19,7 +19,7 @@ import trimesh
 from ..errors import InputError
 from .robot_mesh import ArmGeometry, forward_kinematics
 
-__all__ = ["DEFAULT_CLUSTERS", "MarkerLayout", "place_markers", "marker_positions", "cluster_label"]
+__all__ = ["DEFAULT_CLUSTERS", "MarkerLayout", "place_markers", "marker_positions", "cluster_label", "vendor_smoothed"]
 
 DEFAULT_CLUSTERS: Mapping[int, int] = {0: 3, 1: 3, 2: 4, 3: 3, 4: 4, 6: 3}
 """Markers per link (link index: count) of the default 20-marker layout."""
@@ -192,3 +192,27 @@ def marker_positions(layout: MarkerLayout, T_world_link) -> np.ndarray:
                          f"shape {T.shape}")
     Tm = T[..., layout.link, :, :]
     return np.einsum("...mij,mj->...mi", Tm[..., :3, :3], layout.p_link) + Tm[..., :3, 3]
+
+
+def vendor_smoothed(markers, fc_hz: float, order: int = 4):
+    """`markers` (:class:`mocapfj.types.MarkerTrajectories`) through a zero-phase Butterworth low-pass
+    of `order` at `fc_hz`, as mocap software smooths trajectories before export: each marker's
+    lost samples filled linearly for the filter and lost again after it (a marker never seen
+    stays lost)."""
+    from dataclasses import replace
+
+    from scipy.signal import butter, filtfilt
+
+    x = np.array(markers.xyz, dtype=np.float64)
+    T, M, _ = x.shape
+    ok = np.isfinite(x[:, :, 0])
+    t = np.arange(T)
+    flat = x.reshape(T, M * 3)
+    for j in np.flatnonzero(ok.any(axis=0)):          # per marker: np.interp is one-dimensional
+        for c in range(3):
+            flat[:, 3 * j + c] = np.interp(t, t[ok[:, j]], x[ok[:, j], j, c])
+    b, a = butter(order, fc_hz / (markers.rate_hz / 2))
+    seen = np.repeat(ok.any(axis=0), 3)
+    flat[:, seen] = filtfilt(b, a, flat[:, seen], axis=0)
+    y = np.where(ok[:, :, None], flat.reshape(T, M, 3), np.nan)
+    return replace(markers, xyz=y)

@@ -5,30 +5,20 @@ from __future__ import annotations
 
 from dataclasses import replace
 
-import numpy as np
 import pytest
-from scipy.signal import butter, filtfilt
 
 import mocapfj
 from mocapfj.discover import engine
 from mocapfj.joints.smoothing import smoothing_corner_hz
 from mocapfj.synth.hinge import sample_cases, simulate_hinge
+from mocapfj.synth.markers import vendor_smoothed
 
 from ..discover.conftest import nominal_of
 
 
 def smoothed(rec, fc_hz: float, order: int = 4):
-    """`rec` with its markers through a zero-phase Butterworth low-pass (a mocap vendor's smoothing);
-    lost samples stay lost."""
-    m = rec.markers
-    x = m.xyz.copy()
-    b, a = butter(order, fc_hz / (m.rate_hz / 2))
-    T = np.arange(x.shape[0])
-    for j in range(x.shape[1]):
-        ok = np.isfinite(x[:, j, 0])
-        for c in range(3):
-            x[:, j, c] = np.where(ok, filtfilt(b, a, np.interp(T, T[ok], x[ok, j, c])), np.nan)
-    return replace(rec, markers=replace(m, xyz=x))
+    """`rec` with its markers smoothed as a mocap vendor's export does (:func:`vendor_smoothed`)."""
+    return replace(rec, markers=vendor_smoothed(rec.markers, fc_hz, order))
 
 
 @pytest.fixture(scope="module")
